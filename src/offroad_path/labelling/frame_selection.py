@@ -1,0 +1,46 @@
+"""Which frames get a label (Holder & Breckon 2018, Sec. III-A).
+
+A label at frame f0 is the footprint of the vehicle over frames f0+1..fn, where fn is the first
+frame more than D metres (straight line) from f0. The paper restarts at the frame midway between
+f0 and fn; a fixed stride along the driven path gives denser labels where footage is scarce.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+STRATEGIES = ("midway", "stride")
+
+
+def select_segments(
+    positions: np.ndarray,
+    distance_m: float = 20.0,
+    strategy: str = "midway",
+    stride_m: float = 5.0,
+    min_motion_m: float = 0.01,
+) -> list[tuple[int, int]]:
+    """(f0, fn) pairs for camera centres `positions` (N, 3); fn is the first frame beyond distance_m."""
+    if strategy not in STRATEGIES:
+        raise ValueError(f"unknown frame selection strategy {strategy!r}; valid: {', '.join(STRATEGIES)}")
+    positions = np.asarray(positions, float)
+    steps = np.linalg.norm(np.diff(positions, axis=0), axis=1)
+    moving = np.flatnonzero(steps > min_motion_m)
+    if len(moving) == 0:
+        return []
+    travelled = np.concatenate([[0.0], np.cumsum(steps)])
+    segments = []
+    f0 = int(moving[0])
+    while f0 < len(positions) - 1:
+        beyond = np.flatnonzero(np.linalg.norm(positions[f0 + 1 :] - positions[f0], axis=1) > distance_m)
+        if len(beyond) == 0:
+            break
+        fn = f0 + 1 + int(beyond[0])
+        segments.append((f0, fn))
+        if strategy == "midway":
+            f0 = max((f0 + fn) // 2, f0 + 1)
+        else:
+            ahead = np.flatnonzero(travelled >= travelled[f0] + stride_m)
+            if len(ahead) == 0:
+                break
+            f0 = int(ahead[0])
+    return segments

@@ -1,0 +1,46 @@
+"""Check stereo recordings before labelling them: `python -m offroad_path.sequence PATH [PATH ...]`.
+
+Opens every sequence under each PATH with the same validation the label stage uses, decodes its
+first and last frames, and prints one line per sequence. Bad input: one line naming the file, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from offroad_path.sequence.reader import find_sequences, open_sequence
+from offroad_path.utils.cli import clear_errors
+
+
+def describe(path: str) -> list[str]:
+    lines = []
+    for root in find_sequences(path):
+        seq = open_sequence(root)
+        for i in (0, len(seq) - 1):
+            seq.load_left(i), seq.load_right(i)
+        w, h = seq.image_size
+        travelled = "no poses"
+        if seq.poses is not None:
+            travelled = f"{np.linalg.norm(np.diff(seq.poses[:, :3, 3], axis=0), axis=1).sum():.1f} m of poses"
+        extras = [name for name, value in (("depth", seq.depth), ("semantic", seq.semantic), ("steering", seq.steering)) if value is not None]
+        lines.append(
+            f"{root}: {len(seq)} stereo pairs {w}x{h}, fx {seq.calibration.fx:.1f} px, "
+            f"baseline {seq.calibration.baseline_m:.3f} m, {travelled}" + (f", with {', '.join(extras)}" if extras else "")
+        )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m offroad_path.sequence", description=__doc__.splitlines()[0])
+    parser.add_argument("paths", nargs="+", help="a sequence folder, or a folder of sequences")
+    args = parser.parse_args(argv)
+    with clear_errors():
+        for path in args.paths:
+            for line in describe(path):
+                print(line)
+
+
+if __name__ == "__main__":
+    main()

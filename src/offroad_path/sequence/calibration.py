@@ -1,0 +1,90 @@
+"""Rectified stereo calibration from `calib.txt`: two 3x4 projection matrices, unkeyed or KITTI-keyed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from offroad_path.sequence.errors import SequenceError
+
+
+@dataclass(frozen=True)
+class StereoCalibration:
+    P_left: np.ndarray  # (3, 4)
+    P_right: np.ndarray  # (3, 4)
+
+    @property
+    def K(self) -> np.ndarray:
+        return self.P_left[:, :3].copy()
+
+    @property
+    def fx(self) -> float:
+        return float(self.P_left[0, 0])
+
+    @property
+    def baseline_m(self) -> float:
+        """Distance from the left to the right camera centre, from P_right = K [I | -B e_x]."""
+        return float((self.P_left[0, 3] - self.P_right[0, 3]) / self.P_left[0, 0])
+
+    def to_text(self) -> str:
+        return "".join(" ".join(f"{v:.12e}" for v in P.ravel()) + "\n" for P in (self.P_left, self.P_right))
+
+    @classmethod
+    def from_intrinsics(cls, K: np.ndarray, baseline_m: float) -> StereoCalibration:
+        P_left = np.hstack([K, np.zeros((3, 1))])
+        P_right = P_left.copy()
+        P_right[0, 3] = -K[0, 0] * baseline_m
+        return cls(P_left, P_right)
+
+
+def read_calibration(path: Path, keys: tuple[str, str] | None) -> StereoCalibration:
+    """Parse and check a rectified stereo calib.txt; `keys` picks keyed rows (e.g. P2, P3)."""
+    try:
+        lines = [line.strip() for line in path.read_text().splitlines() if line.strip()]
+    except (OSError, UnicodeDecodeError) as e:
+        raise SequenceError(path, f"cannot be read as text ({e})") from e
+    keyed: dict[str, str] = {}
+    unkeyed: list[str] = []
+    for line in lines:
+        head, sep, rest = line.partition(":")
+        if sep:
+            keyed[head.strip()] = rest
+        else:
+            unkeyed.append(line)
+    if keys is None:
+        if keyed:
+            keys = next((k for k in (("P0", "P1"), ("P2", "P3")) if k[0] in keyed and k[1] in keyed), None)
+            if keys is None:
+                raise SequenceError(path, f"has keyed rows {sorted(keyed)} but neither P0/P1 nor P2/P3")
+        elif len(unkeyed) != 2:
+            raise SequenceError(path, f"must hold two rows of 12 numbers (P_left, P_right), found {len(unkeyed)} rows")
+    if keys is not None:
+        missing = [k for k in keys if k not in keyed]
+        if missing:
+            raise SequenceError(path, f"lacks the row(s) {', '.join(missing)}")
+        rows = [keyed[k] for k in keys]
+    else:
+        rows = unkeyed
+    P_left, P_right = (_matrix(path, row, name) for row, name in zip(rows, ("left", "right"), strict=True))
+    calib = StereoCalibration(P_left, P_right)
+    if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
+        raise SequenceError(path, "left and right matrices have different intrinsics: the pair is not rectified")
+    if P_left[0, 0] <= 0 or P_left[1, 1] <= 0:
+        raise SequenceError(path, "focal lengths must be positive")
+    if not calib.baseline_m > 0:
+        raise SequenceError(path, f"the right matrix has no baseline (B = {calib.baseline_m:g} m): P_right[0,3] must be -fx*B with B > 0")
+    return calib
+
+
+def _matrix(path: Path, row: str, name: str) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in row.split()])
+    except ValueError as e:
+        raise SequenceError(path, f"the {name} matrix has a value that is not a number ({e})") from e
+    if values.size != 12:
+        raise SequenceError(path, f"the {name} matrix has {values.size} numbers, expected 12")
+    if not np.isfinite(values).all():
+        raise SequenceError(path, f"the {name} matrix has a non-finite value")
+    return values.reshape(3, 4)

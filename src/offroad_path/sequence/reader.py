@@ -1,0 +1,193 @@
+"""Reading stereo sequences: this project's layout (see DESIGN.md) and KITTI's odometry layout.
+
+Everything is validated on opening, so that a later stage never meets a half-good sequence:
+every error names the file and says what is wrong with it.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from offroad_path.sequence.calibration import StereoCalibration, read_calibration
+from offroad_path.sequence.errors import SequenceError
+from offroad_path.sequence.poses import read_poses
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+# (left folder, right folder, calib keys) in order of preference; None keys: two unkeyed rows.
+LAYOUTS = (("image_l", "image_r", None), ("image_2", "image_3", ("P2", "P3")), ("image_0", "image_1", ("P0", "P1")))
+
+
+@dataclass
+class Sequence:
+    root: Path
+    left: list[Path]
+    right: list[Path]
+    calibration: StereoCalibration
+    image_size: tuple[int, int]  # (width, height)
+    poses: np.ndarray | None = None  # (N, 4, 4) left camera to world
+    poses_path: Path | None = None
+    times: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+    depth: list[Path] | None = None
+    semantic: list[Path] | None = None
+    steering: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.left)
+
+    @property
+    def name(self) -> str:
+        return self.root.name
+
+    def load_left(self, i: int, grey: bool = False) -> np.ndarray:
+        return read_image(self.left[i], grey)
+
+    def load_right(self, i: int, grey: bool = False) -> np.ndarray:
+        return read_image(self.right[i], grey)
+
+    def load_depth(self, i: int) -> np.ndarray:
+        """Ground-truth depth in metres (float32), 0 where there is none."""
+        if self.depth is None:
+            raise SequenceError(self.root / "depth", "this sequence has no ground-truth depth")
+        raw = cv2.imread(str(self.depth[i]), cv2.IMREAD_UNCHANGED)
+        if raw is None or raw.dtype != np.uint16 or raw.ndim != 2:
+            raise SequenceError(self.depth[i], "not a single-channel 16-bit PNG")
+        return raw.astype(np.float32) / 1000.0
+
+    def load_semantic(self, i: int) -> np.ndarray:
+        if self.semantic is None:
+            raise SequenceError(self.root / "semantic", "this sequence has no semantic maps")
+        raw = cv2.imread(str(self.semantic[i]), cv2.IMREAD_UNCHANGED)
+        if raw is None or raw.ndim != 2:
+            raise SequenceError(self.semantic[i], "not a single-channel PNG")
+        return raw
+
+
+def read_image(path: Path, grey: bool = False) -> np.ndarray:
+    """An image as RGB (H, W, 3) uint8, or grey (H, W) uint8."""
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+    if image is None:
+        raise SequenceError(path, "cannot be decoded as an image")
+    return image if grey else cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """(width, height) from a PNG header, without decoding the image."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(24)
+    except OSError as e:
+        raise SequenceError(path, f"cannot be read ({e.strerror})") from e
+    if len(head) < 24 or head[:8] != PNG_SIGNATURE or head[12:16] != b"IHDR":
+        raise SequenceError(path, "is not a PNG file (bad signature or header)")
+    return struct.unpack(">II", head[16:24])
+
+
+def find_sequences(root: str | Path) -> list[Path]:
+    """Sequence folders under root (root itself if it is one), sorted by path."""
+    root = Path(root)
+    if not root.is_dir():
+        raise SequenceError(root, "is not a directory")
+    if (root / "calib.txt").is_file():
+        return [root]
+    found = sorted(p.parent for p in root.rglob("calib.txt"))
+    if not found:
+        raise SequenceError(root, "holds no sequence (no calib.txt below it)")
+    return found
+
+
+def open_sequence(root: str | Path) -> Sequence:
+    root = Path(root)
+    calib_path = root / "calib.txt"
+    if not calib_path.is_file():
+        raise SequenceError(calib_path, "is missing")
+    for left_dir, right_dir, keys in LAYOUTS:
+        if (root / left_dir).is_dir():
+            break
+    else:
+        raise SequenceError(root, "has no image_l/, image_2/ or image_0/ folder of left images")
+    calibration = read_calibration(calib_path, keys)
+    left, right = _stereo_pairs(root / left_dir, root / right_dir)
+    image_size = _common_size(left + right)
+    n = len(left)
+
+    poses_path = _find_poses(root)
+    poses = read_poses(poses_path, expected_rows=n) if poses_path else None
+    times = _read_column(root / "times.txt", n) if (root / "times.txt").is_file() else None
+    steering = _read_column(root / "steering.txt", n) if (root / "steering.txt").is_file() else None
+    meta = _read_meta(root / "meta.json")
+    depth = _frames_like(root / "depth", left)
+    semantic = _frames_like(root / "semantic", left)
+    return Sequence(root, left, right, calibration, image_size, poses, poses_path, times, meta, depth, semantic, steering)
+
+
+def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Path]]:
+    left = sorted(left_dir.glob("*.png"))
+    if not left:
+        raise SequenceError(left_dir, "holds no PNG images")
+    if not right_dir.is_dir():
+        raise SequenceError(right_dir, "is missing: a stereo sequence needs right images")
+    right = sorted(right_dir.glob("*.png"))
+    left_names = [p.name for p in left]
+    right_names = [p.name for p in right]
+    if left_names != right_names:
+        missing = sorted(set(left_names) - set(right_names))
+        extra = sorted(set(right_names) - set(left_names))
+        what = f"lacks {len(missing)} right image(s) of the left ones, first {missing[0]}" if missing else f"has {len(extra)} image(s) with no left partner, first {extra[0]}"
+        raise SequenceError(right_dir, f"{what} ({len(left)} left, {len(right)} right)")
+    return left, [right_dir / name for name in left_names]
+
+
+def _common_size(paths: list[Path]) -> tuple[int, int]:
+    size = png_size(paths[0])
+    for p in paths[1:]:
+        if (s := png_size(p)) != size:
+            raise SequenceError(p, f"is {s[0]}x{s[1]}, but {paths[0]} is {size[0]}x{size[1]}: every image must have one size")
+    return size
+
+
+def _find_poses(root: Path) -> Path | None:
+    for candidate in (root / "poses.txt", root / "poses" / f"{root.name}.txt", root.parent.parent / "poses" / f"{root.name}.txt"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _read_column(path: Path, expected_rows: int) -> np.ndarray:
+    try:
+        values = np.loadtxt(path, dtype=np.float64, ndmin=1)
+    except ValueError as e:
+        raise SequenceError(path, f"is not one number per line ({e})") from e
+    if values.ndim != 1 or len(values) != expected_rows:
+        raise SequenceError(path, f"has {len(values)} rows of one number, expected {expected_rows} (one per frame)")
+    if not np.isfinite(values).all():
+        raise SequenceError(path, f"has a non-finite value at row {int(np.flatnonzero(~np.isfinite(values))[0]) + 1}")
+    return values
+
+
+def _read_meta(path: Path) -> dict:
+    if not path.is_file():
+        return {}
+    try:
+        meta = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise SequenceError(path, f"is not valid JSON ({e})") from e
+    if not isinstance(meta, dict):
+        raise SequenceError(path, "must hold a JSON object")
+    return meta
+
+
+def _frames_like(folder: Path, left: list[Path]) -> list[Path] | None:
+    if not folder.is_dir():
+        return None
+    paths = [folder / p.name for p in left]
+    missing = [p for p in paths if not p.is_file()]
+    if missing:
+        raise SequenceError(folder, f"lacks {len(missing)} of the {len(left)} frames, first {missing[0].name}")
+    return paths

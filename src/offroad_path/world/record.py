@@ -1,0 +1,125 @@
+"""Drive through a world and record it as a stereo sequence in the layout of DESIGN.md."""
+
+from __future__ import annotations
+
+import json
+import logging
+import multiprocessing as mp
+import os
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import cv2
+import numpy as np
+from omegaconf import OmegaConf
+
+from offroad_path import __version__
+from offroad_path.config import WorldConfig
+from offroad_path.sequence.calibration import StereoCalibration
+from offroad_path.sequence.poses import poses_to_text
+from offroad_path.world.classes import CLASS_NAMES
+from offroad_path.world.render import PinholeCamera, render_view
+from offroad_path.world.scene import build_world
+
+log = logging.getLogger(__name__)
+
+DEPTH_MAX_MM = 65535
+PNG_OPTIONS = [cv2.IMWRITE_PNG_COMPRESSION, 3]
+
+
+def sequence_seed(master_seed: int, index: int) -> int:
+    """Independent, reproducible per-sequence seeds from one master seed."""
+    return int(np.random.SeedSequence([master_seed, index]).generate_state(1)[0])
+
+
+def camera_for(cfg: WorldConfig) -> PinholeCamera:
+    return PinholeCamera.from_fov(cfg.width, cfg.height, cfg.hfov_deg)
+
+
+def encode_depth(depth_m: np.ndarray) -> np.ndarray:
+    """Metres to 16-bit millimetres: 0 stays 'none', hits are at least 1 mm, far ones saturate."""
+    mm = np.clip(np.rint(depth_m * 1000.0), 1, DEPTH_MAX_MM)
+    return np.where(depth_m > 0, mm, 0).astype(np.uint16)
+
+
+def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path) -> dict:
+    """Render one sequence into out_dir; returns a summary (frames, distance, class pixel counts)."""
+    world = build_world(cfg, seed)
+    camera = camera_for(cfg)
+    rays = camera.rays()
+    baseline = cfg.rig.baseline_m
+    to_right = np.eye(4)
+    to_right[0, 3] = baseline  # the right camera sits at +B along the left camera's x axis
+
+    for sub in ("image_l", "image_r", "depth", "semantic"):
+        (out_dir / sub).mkdir(parents=True)
+    class_pixels = np.zeros(len(CLASS_NAMES), np.int64)
+    for k, pose in enumerate(world.poses):
+        name = f"{k:06d}.png"
+        left = render_view(world, camera, pose, cfg.max_distance_m, rays)
+        right = render_view(world, camera, pose @ to_right, cfg.max_distance_m, rays)
+        cv2.imwrite(str(out_dir / "image_l" / name), left.image[:, :, ::-1], PNG_OPTIONS)
+        cv2.imwrite(str(out_dir / "image_r" / name), right.image[:, :, ::-1], PNG_OPTIONS)
+        cv2.imwrite(str(out_dir / "depth" / name), encode_depth(left.depth), PNG_OPTIONS)
+        cv2.imwrite(str(out_dir / "semantic" / name), left.semantic, PNG_OPTIONS)
+        class_pixels += np.bincount(left.semantic.ravel(), minlength=len(CLASS_NAMES))
+
+    first_inv = np.linalg.inv(world.poses[0])
+    relative = first_inv[None] @ world.poses  # KITTI convention: the first pose is the identity
+    (out_dir / "calib.txt").write_text(StereoCalibration.from_intrinsics(camera.K, baseline).to_text())
+    (out_dir / "poses.txt").write_text(poses_to_text(relative))
+    (out_dir / "times.txt").write_text("".join(f"{k / cfg.fps:.6f}\n" for k in range(len(world.poses))))
+    (out_dir / "steering.txt").write_text("".join(f"{s:.6f}\n" for s in world.steering))
+    v = cfg.vehicle
+    distance = float(np.linalg.norm(np.diff(world.poses[:, :3, 3], axis=0), axis=1).sum())
+    meta = {
+        "generator": "offroad_path.world",
+        "generator_version": __version__,
+        "seed": seed,
+        "rig": cfg.rig.name,
+        "baseline_m": baseline,
+        "fps": cfg.fps,
+        "width": cfg.width,
+        "height": cfg.height,
+        "hfov_deg": cfg.hfov_deg,
+        "camera_height_m": v.camera_height_m,
+        "vehicle_width_m": v.width_m,
+        # Footprint extent along the camera's forward axis, relative to the camera centre.
+        "footprint_front_m": v.length_m / 2 - v.camera_forward_m,
+        "footprint_rear_m": -(v.length_m / 2 + v.camera_forward_m),
+        "vehicle": OmegaConf.to_container(v) if OmegaConf.is_config(v) else asdict(v),
+        "steering": "bicycle-model wheel angle over max_steering_deg, in [-1, 1], positive turns right",
+        "depth": "z of the left camera in millimetres (uint16), 0 for sky, 65535 for 65.535 m or farther",
+        "classes": list(CLASS_NAMES),
+        "world_from_first_camera": world.poses[0].tolist(),
+        "world_frame": "x right, y down (gravity), z forward at the start",
+        "distance_m": distance,
+        "frames": len(world.poses),
+    }
+    (out_dir / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
+    return {"name": out_dir.name, "frames": len(world.poses), "distance_m": distance, "class_pixels": class_pixels.tolist()}
+
+
+def _record_job(args: tuple[WorldConfig, int, str]) -> tuple[dict, float]:
+    cv2.setNumThreads(1)  # one process per core: no nested threading
+    cfg, seed, out_dir = args
+    start = time.perf_counter()
+    summary = record_sequence(cfg, seed, Path(out_dir))
+    return summary, time.perf_counter() - start
+
+
+def record_sequences(cfg: WorldConfig, count: int, master_seed: int, out_dir: Path, workers: int = 0) -> list[dict]:
+    """Render `count` sequences into out_dir/seq_NNN in parallel, one process per worker."""
+    workers = workers or os.cpu_count() or 1
+    jobs = [(cfg, sequence_seed(master_seed, i), str(out_dir / f"seq_{i:03d}")) for i in range(count)]
+    start = time.perf_counter()
+    if workers == 1 or count == 1:
+        results = [_record_job(job) for job in jobs]
+    else:
+        with mp.get_context("fork").Pool(min(workers, count)) as pool:
+            results = pool.map(_record_job, jobs, chunksize=1)
+    elapsed = time.perf_counter() - start
+    frames = sum(r[0]["frames"] for r in results)
+    log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s on %d workers", count, frames, elapsed, frames / elapsed, workers)
+    return [r[0] for r in results]

@@ -1,0 +1,262 @@
+"""A vectorised ray caster for the off-road world: exact depth, semantic class and a shaded image.
+
+Terrain: each pixel's ray marches the height field with steps no longer than the clearance over
+the slope bound allows (relaxed with distance), then bisects the crossing and finishes with one
+secant step, so the hit point lies on the bilinear surface to well under a millimetre.
+Objects: exact analytic intersections, each object only on the pixels of its projected bounds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from offroad_path.world.classes import SKY, WATER
+from offroad_path.world.objects import intersect
+from offroad_path.world.scene import World
+from offroad_path.world.terrain import Terrain, sample_bilinear
+
+NEAR_M = 0.3
+RELAX = 0.02  # march step at least 2 % of the distance: thinner distant bumps than that are skipped
+MIN_STEP_M = 0.02
+BISECTIONS = 3
+REFINEMENTS = 6
+FOG_DISTANCE_M = 220.0
+TEXTURE_CONTRAST = np.array([0.0, 0.05, 0.45, 0.15, 0.5, 0.5, 0.4, 0.2])  # per class
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_fov(cls, width: int, height: int, hfov_deg: float) -> PinholeCamera:
+        f = (width / 2) / np.tan(np.deg2rad(hfov_deg) / 2)
+        return cls(width, height, f, f, (width - 1) / 2, (height - 1) / 2)
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def rays(self) -> np.ndarray:
+        """Ray directions (H*W, 3) through pixel centres, scaled to z = 1 so that t is depth."""
+        u, v = np.meshgrid(np.arange(self.width), np.arange(self.height))
+        return np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones_like(u, float)], axis=-1).reshape(-1, 3)
+
+
+@dataclass
+class View:
+    image: np.ndarray  # (H, W, 3) uint8 RGB
+    depth: np.ndarray  # (H, W) float64 metres along the optical axis, 0 where nothing was hit
+    semantic: np.ndarray  # (H, W) uint8 class ids
+
+
+def march_terrain(terrain: Terrain, origin: np.ndarray, dirs: np.ndarray, max_t: float) -> np.ndarray:
+    """Depth t of the first terrain crossing for each ray o + t*d, inf where none within max_t."""
+    ox, oy, oz = origin
+
+    def clearance(t: np.ndarray, dx: np.ndarray, dy: np.ndarray, dz: np.ndarray) -> np.ndarray:
+        return -(oy + t * dy) - terrain.elevation(ox + t * dx, oz + t * dz)
+
+    horizontal = np.hypot(dirs[:, 0], dirs[:, 2])
+    # Clearance c(t) = -y - elevation falls no faster than `rate` per unit t.
+    rate = dirs[:, 1] + terrain.max_slope * horizontal
+    t_hit = np.full(len(dirs), np.inf)
+    # A rising ray can only meet ground higher than the camera: above the highest terrain within
+    # reach, it is sky. Rays climbing faster than any slope never reach the ground at all.
+    top = terrain.max_elevation_near(ox, oz, max_t)
+    with np.errstate(divide="ignore"):
+        t_limit = np.where(dirs[:, 1] < 0, np.minimum((top + oy) / -dirs[:, 1], max_t), max_t)
+    idx = np.flatnonzero((rate > 0) & (t_limit > NEAR_M))
+    dx, dy, dz, rate, t_limit = dirs[idx, 0], dirs[idx, 1], dirs[idx, 2], rate[idx], t_limit[idx]
+    t = np.full(len(idx), NEAR_M)
+    t_prev, c_prev = t.copy(), np.full(len(idx), np.inf)
+    alive = np.ones(len(idx), bool)
+    brackets = []
+    while len(idx):
+        c = clearance(t, dx, dy, dz)
+        crossed = alive & (c <= 0)
+        if crossed.any():
+            brackets.append((idx[crossed], t_prev[crossed], t[crossed], c_prev[crossed], c[crossed]))
+        step = np.maximum(np.maximum(c / rate, RELAX * t), MIN_STEP_M)
+        # Where the ray is above all terrain within a radius, it may go that far (or until it
+        # sinks to that height) in one step.
+        y = oy + t * dy
+        horiz = np.hypot(dx, dz)
+        for level, (radius, _) in enumerate(terrain.max_levels):
+            headroom = -y - terrain.max_elevation_within(level, ox + t * dx, oz + t * dz)
+            reach = np.minimum(radius / horiz, np.where(dy > 0, headroom / np.maximum(dy, 1e-12), np.inf))
+            step = np.where(headroom > 0, np.maximum(step, reach), step)
+        t_prev, c_prev = t, c
+        t = t + step
+        alive &= ~crossed & (t < t_limit)
+        # Finished rays ride along until a quarter of the batch is dead: compaction costs a copy.
+        if alive.sum() < 0.75 * len(alive):
+            keep = np.flatnonzero(alive)
+            idx, dx, dy, dz, rate, t_limit = idx[keep], dx[keep], dy[keep], dz[keep], rate[keep], t_limit[keep]
+            t, t_prev, c_prev, alive = t[keep], t_prev[keep], c_prev[keep], alive[keep]
+    if not brackets:
+        return t_hit
+    idx, lo, hi, c_lo, c_hi = (np.concatenate(parts) for parts in zip(*brackets, strict=True))
+    # A ray already below ground at NEAR_M has no bracket: report the near plane.
+    below = ~np.isfinite(c_lo)
+    lo[below], c_lo[below] = hi[below], 0.0
+    dx, dy, dz = dirs[idx, 0], dirs[idx, 1], dirs[idx, 2]
+    for i in range(REFINEMENTS):
+        # Bisection first (robust on any bracket), then false position (fast once it is tight).
+        if i < BISECTIONS:
+            mid = 0.5 * (lo + hi)
+        else:
+            denom = c_lo - c_hi
+            mid = lo + np.where(denom > 0, c_lo / np.where(denom > 0, denom, 1.0), 0.5) * (hi - lo)
+        c = clearance(mid, dx, dy, dz)
+        above = c > 0
+        lo = np.where(above, mid, lo)
+        c_lo = np.where(above, c, c_lo)
+        hi = np.where(above, hi, mid)
+        c_hi = np.where(above, c_hi, c)
+    denom = c_lo - c_hi
+    frac = np.where(denom > 0, c_lo / np.where(denom > 0, denom, 1.0), 0.0)
+    t_hit[idx] = lo + frac * (hi - lo)
+    return t_hit
+
+
+def trace_objects(world: World, camera: PinholeCamera, pose: np.ndarray, dirs: np.ndarray, t_bound: np.ndarray, max_t: float):
+    """Object hits nearer than t_bound per pixel: (t, normal, object index); index -1 where none."""
+    h, w = camera.height, camera.width
+    t_best = t_bound.copy()
+    normal = np.zeros((h * w, 3))
+    index = np.full(h * w, -1, np.int64)
+    if not world.objects.kind:
+        return t_best, normal, index
+    origin, rot = pose[:3, 3], pose[:3, :3]
+    spheres = world.objects.bounding_spheres()
+    centre_cam = (spheres[:, :3] - origin) @ rot  # (N, 3) in the camera frame
+    r = spheres[:, 3]
+    x, y, z = centre_cam.T
+    near = z - r
+    visible = (z + r > NEAR_M) & (near < max_t)
+    # A bounding sphere wholly in front of the camera projects inside its corners' extremes.
+    in_front = near > 0.05
+    zs = np.where(in_front, near, 1.0)
+    u_lo = camera.fx * np.minimum((x - r) / zs, (x - r) / (z + r)) + camera.cx
+    u_hi = camera.fx * np.maximum((x + r) / zs, (x + r) / (z + r)) + camera.cx
+    v_lo = camera.fy * np.minimum((y - r) / zs, (y - r) / (z + r)) + camera.cy
+    v_hi = camera.fy * np.maximum((y + r) / zs, (y + r) / (z + r)) + camera.cy
+    u_lo = np.where(in_front, u_lo, 0)
+    v_lo = np.where(in_front, v_lo, 0)
+    u_hi = np.where(in_front, u_hi, w - 1)
+    v_hi = np.where(in_front, v_hi, h - 1)
+    visible &= (u_hi >= 0) & (u_lo <= w - 1) & (v_hi >= 0) & (v_lo <= h - 1)
+    flat = np.arange(h * w).reshape(h, w)
+    candidates = np.flatnonzero(visible)
+    for i in candidates[np.argsort(near[candidates])]:  # front to back: nearer hits cull later work
+        r0, r1 = max(int(np.floor(v_lo[i])), 0), min(int(np.ceil(v_hi[i])) + 1, h)
+        c0, c1 = max(int(np.floor(u_lo[i])), 0), min(int(np.ceil(u_hi[i])) + 1, w)
+        pix = flat[r0:r1, c0:c1].ravel()
+        pix = pix[t_best[pix] > near[i]]  # pixels already nearer than the whole object stay
+        if not len(pix):
+            continue
+        t, n = intersect(world.objects.kind[i], world.objects.params[i], origin, dirs[pix])
+        closer = t < t_best[pix]
+        if closer.any():
+            pix = pix[closer]
+            t_best[pix] = t[closer]
+            normal[pix] = n[closer]
+            index[pix] = i
+    return t_best, normal, index
+
+
+def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: float, cam_rays: np.ndarray | None = None) -> View:
+    """Render one camera with camera-to-world `pose` (4x4)."""
+    rays = camera.rays() if cam_rays is None else cam_rays
+    dirs = rays @ pose[:3, :3].T  # (M, 3) world directions, t = depth
+    origin = pose[:3, 3]
+    t_ground = march_terrain(world.terrain, origin, dirs, max_t)
+    t, n_obj, obj_index = trace_objects(world, camera, pose, dirs, t_ground, max_t)
+    use_obj = obj_index >= 0
+    hit = np.isfinite(t) & (t < max_t)
+    t = np.where(hit, t, 0.0)
+
+    points = origin + t[:, None] * dirs
+    semantic = np.full(len(dirs), SKY, np.uint8)
+    albedo = np.zeros((len(dirs), 3))
+    normal = np.zeros((len(dirs), 3))
+    ground = hit & ~use_obj
+    obj = hit & use_obj
+    g = np.flatnonzero(ground)
+    row, col = world.material_grid.nearest(points[g, 0], points[g, 2])
+    semantic[g] = world.materials[row, col]
+    albedo[g] = world.palette[semantic[g]]
+    normal[g] = world.terrain.normals(points[g, 0], points[g, 2])
+    o = np.flatnonzero(obj)
+    semantic[o] = np.asarray(world.objects.cls, np.uint8)[obj_index[o]]
+    albedo[o] = np.asarray(world.objects.color)[obj_index[o]]
+    normal[o] = n_obj[o]
+
+    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    rgb = _sky_colour(world, unit)
+    lit = np.flatnonzero(hit)
+    footprint = t[lit] / camera.fx / np.maximum(np.abs(np.einsum("ij,ij->i", unit[lit], normal[lit])), 0.25)
+    detail = _detail(world, points[lit], semantic[lit], footprint, ground[lit])
+    sun_vis = np.ones(len(lit))
+    sun_vis[ground[lit]] = sample_bilinear(world.shadow, *world.material_grid.coords(points[g, 0], points[g, 2]))
+    sun = np.maximum(normal[lit] @ world.sky.sun, 0.0) * sun_vis
+    shade = 0.35 * world.sky.zenith + 0.9 * sun[:, None]
+    colour = albedo[lit] * detail * shade
+    water = semantic[lit] == WATER
+    if water.any():
+        reflected = unit[lit][water] * np.array([1.0, -1.0, 1.0])
+        colour[water] = 0.45 * colour[water] + 0.55 * _sky_colour(world, reflected) * (0.4 + 0.6 * sun_vis[water, None])
+    fog = 1.0 - np.exp(-t[lit] * np.linalg.norm(dirs[lit], axis=1) / FOG_DISTANCE_M)
+    rgb[lit] = colour * (1 - fog[:, None]) + world.sky.horizon * fog[:, None]
+
+    image = np.clip(255.0 * np.clip(rgb, 0, 1) ** (1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
+    shape = (camera.height, camera.width)
+    return View(image=image.reshape(*shape, 3), depth=t.reshape(shape), semantic=semantic.reshape(shape))
+
+
+def _detail(world: World, points: np.ndarray, cls: np.ndarray, footprint: np.ndarray, ground: np.ndarray) -> np.ndarray:
+    """Multiplicative texture detail (N, 3), mip-blended by the pixel's footprint on the surface."""
+    tex = world.textures
+    # Ground textures lie in x-z; objects use x+z along their sides and y up them.
+    a = np.where(ground, points[:, 0], points[:, 0] + points[:, 2])
+    b = np.where(ground, points[:, 2], points[:, 1])
+    fine_u = np.mod(a / 0.01, 512).astype(np.float32)
+    fine_v = np.mod(b / 0.01, 512).astype(np.float32)
+    level = np.clip(np.log2(np.maximum(footprint, 1e-4) / 0.01) / 2, 0.0, 2.0)
+    mips = [sample_bilinear(tex[f"fine{k}"], fine_u, fine_v, wrap=True) for k in range(3)]
+    w1 = np.clip(level, 0, 1)
+    w2 = np.clip(level - 1, 0, 1)
+    fine = mips[0] * (1 - w1) + mips[1] * (w1 - w2) + mips[2] * w2
+    fine *= np.clip(1.2 - footprint / 0.4, 0.3, 1.0)
+    coarse = sample_bilinear(tex["coarse"], np.mod(a / 0.08, 512).astype(np.float32), np.mod(b / 0.08, 512).astype(np.float32), wrap=True)
+    contrast = TEXTURE_CONTRAST[cls]
+    gain = 1.0 + contrast * (0.5 * fine + 0.35 * coarse)
+    # Coarse patches also shift hue a little (dry grass, wet dirt).
+    hue = np.stack([1 + 0.25 * contrast * coarse, np.ones_like(coarse), 1 - 0.25 * contrast * coarse], axis=1)
+    return np.maximum(gain, 0.05)[:, None] * hue
+
+
+def _sky_colour(world: World, unit: np.ndarray) -> np.ndarray:
+    sky = world.sky
+    up = np.clip(-unit[:, 1], 0.0, 1.0)
+    base = sky.horizon + (sky.zenith - sky.horizon) * np.sqrt(up)[:, None]
+    sun_glow = np.clip(unit @ sky.sun, 0, 1) ** 64
+    colour = base + 0.6 * sun_glow[:, None]
+    # Clouds on a plane far overhead: a function of direction only, identical in both cameras.
+    rising = up > 0.02
+    k = np.flatnonzero(rising)
+    scale = 40.0 / np.maximum(up[k], 0.02)
+    cu = np.mod(unit[k, 0] * scale, 512).astype(np.float32)
+    cv = np.mod(unit[k, 2] * scale, 512).astype(np.float32)
+    density = sample_bilinear(world.textures["cloud"], cu, cv, wrap=True)
+    cover = np.clip((density - (2 - 4 * sky.cloud_cover)) * 0.5, 0, 1) * np.clip(up[k] * 8, 0, 1)
+    colour[k] = colour[k] * (1 - cover[:, None]) + np.array([0.95, 0.95, 0.97]) * cover[:, None]
+    return colour

@@ -1,0 +1,392 @@
+"""A procedural off-road world: terrain, ground materials, a track with forks and detours,
+puddles, paved stretches, vegetation, man-made obstacles, sun and sky, and the drive through it.
+
+Everything is drawn from one seed, so a world is a pure function of (config, seed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from offroad_path.config import WorldConfig
+from offroad_path.world.classes import DIRT, FOLIAGE, GRASS, OBSTACLE, PAVED, TREE, WATER
+from offroad_path.world.objects import Objects
+from offroad_path.world.terrain import Grid, Terrain, fourier_hills, value_noise
+from offroad_path.world.trajectory import (
+    ARC_STEP_M,
+    Curve,
+    VehicleGeometry,
+    camera_poses,
+    frame_arc_lengths,
+    normalised_steering,
+    random_drive,
+    smooth_random,
+)
+
+HEIGHT_STEP_M = 0.25
+MATERIAL_STEP_M = 0.05
+
+BASE_COLORS = {  # linear RGB albedo before per-world jitter
+    WATER: (0.10, 0.13, 0.12),
+    DIRT: (0.50, 0.38, 0.26),
+    PAVED: (0.36, 0.36, 0.37),
+    GRASS: (0.26, 0.42, 0.14),
+    FOLIAGE: (0.14, 0.30, 0.09),
+    TREE: (0.09, 0.22, 0.07),
+    OBSTACLE: (0.55, 0.50, 0.45),
+}
+TRUNK_COLOR = (0.28, 0.20, 0.13)
+
+
+@dataclass
+class Sky:
+    sun: np.ndarray  # unit vector toward the sun, world frame (y down)
+    zenith: np.ndarray
+    horizon: np.ndarray
+    cloud_cover: float
+
+
+@dataclass
+class World:
+    terrain: Terrain
+    materials: np.ndarray  # (rows, cols) uint8 class ids on `material_grid`
+    material_grid: Grid
+    shadow: np.ndarray  # (rows, cols) float32 in [0, 1], 1 = lit, on `material_grid`
+    objects: Objects
+    palette: np.ndarray  # (8, 3) albedo per class
+    sky: Sky
+    drive: Curve
+    track: Curve
+    frame_s: np.ndarray  # arc length of the drive at each frame
+    poses: np.ndarray  # (frames, 4, 4) left camera to world
+    steering: np.ndarray  # (frames,) normalised steering
+    textures: dict[str, np.ndarray]
+
+
+def vehicle_geometry(cfg: WorldConfig) -> VehicleGeometry:
+    v = cfg.vehicle
+    return VehicleGeometry(
+        wheelbase_m=v.wheelbase_m,
+        track_m=v.track_m,
+        width_m=v.width_m,
+        length_m=v.length_m,
+        camera_height_m=v.camera_height_m,
+        camera_forward_m=v.camera_forward_m,
+        camera_pitch_deg=v.camera_pitch_deg,
+        max_steering_deg=v.max_steering_deg,
+    )
+
+
+def build_world(cfg: WorldConfig, seed: int) -> World:
+    rng = np.random.default_rng(seed)
+    density = rng.uniform(1 - cfg.density_jitter, 1 + cfg.density_jitter, size=4)
+    frame_s = frame_arc_lengths(rng, cfg.frames, cfg.fps, (cfg.speed_min_mps, cfg.speed_max_mps))
+    drive_len = frame_s[-1] + cfg.max_distance_m + 20.0
+    drive = random_drive(rng, drive_len, cfg.max_curvature)
+    track = _track_from_drive(rng, drive, cfg)
+
+    margin = cfg.max_distance_m + 10.0
+    lo = drive.xz.min(axis=0) - margin
+    hi = drive.xz.max(axis=0) + margin
+    hgrid = _grid(lo, hi, HEIGHT_STEP_M)
+    mgrid = _grid(lo, hi, MATERIAL_STEP_M)
+
+    heights = fourier_hills(rng, hgrid, cfg.hill_height_m, (40.0, 150.0), 6)
+    heights += cfg.bump_height_m * value_noise(rng, hgrid.shape, 1.5 / HEIGHT_STEP_M)
+    heights += 0.3 * cfg.bump_height_m * value_noise(rng, hgrid.shape, 0.6 / HEIGHT_STEP_M)
+    # A track bed is smoother than the land around it.
+    bed = _polyline_mask(hgrid, track.xz, cfg.track_width_m + 2.0)
+    bed = cv2.GaussianBlur(bed.astype(np.float32) / 255.0, (0, 0), 1.0 / HEIGHT_STEP_M)
+    smooth = cv2.GaussianBlur(heights.astype(np.float32), (0, 0), 2.0 / HEIGHT_STEP_M).astype(np.float64)
+    heights = heights + 0.8 * bed * (smooth - heights)
+
+    materials = np.full(mgrid.shape, GRASS, np.uint8)
+    forks = _forks(rng, track, cfg.forks_per_100m * density[0])
+    for fork in forks:
+        _paint_ragged(rng, materials, mgrid, fork.xz, cfg.track_width_m * 0.8, DIRT)
+    _paint_ragged(rng, materials, mgrid, track.xz, cfg.track_width_m, DIRT)
+    _paint_paved(rng, materials, mgrid, track, cfg)
+    puddles = _puddles(rng, track, cfg.puddles_per_100m * density[1], cfg.track_width_m)
+    for centre, axes, angle in puddles:
+        c = tuple(int(v) for v in np.rint(mgrid.to_pixel(centre[None])[0]))
+        ax = tuple(int(v) for v in np.rint(np.asarray(axes) / MATERIAL_STEP_M))
+        cv2.ellipse(materials, c, ax, angle, 0, 360, WATER, -1)
+    heights = _flatten_puddles(heights, hgrid, puddles)
+    terrain = Terrain(heights, hgrid)
+
+    vehicle = vehicle_geometry(cfg)
+    poses = camera_poses(drive, frame_s, terrain, vehicle)
+    steering = normalised_steering(drive.at(frame_s)[2], vehicle)
+
+    sky = _sky(rng, cfg)
+    objects = _objects(rng, cfg, terrain, drive, track, density)
+    shadow = _shadow_map(mgrid, terrain, objects, sky.sun)
+    palette = _palette(rng)
+    textures = _textures(rng)
+    return World(terrain, materials, mgrid, shadow, objects, palette, sky, drive, track, frame_s, poses, steering, textures)
+
+
+def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> Grid:
+    cols = int(np.ceil((hi[0] - lo[0]) / step)) + 1
+    rows = int(np.ceil((hi[1] - lo[1]) / step)) + 1
+    return Grid(x0=float(lo[0]), z0=float(lo[1]), step=step, shape=(rows, cols))
+
+
+def _track_from_drive(rng: np.random.Generator, drive: Curve, cfg: WorldConfig) -> Curve:
+    """The track follows the drive with a small wobble, except on detours the vehicle cuts across grass."""
+    s = np.arange(len(drive.xz)) * ARC_STEP_M
+    offset = 0.35 * smooth_random(rng, s, (15.0, 40.0), 3)
+    n_detours = rng.poisson(cfg.offtrack_per_100m * s[-1] / 100.0)
+    for _ in range(n_detours):
+        start = rng.uniform(15.0, max(s[-1] - 60.0, 16.0))
+        length = rng.uniform(25.0, 45.0)
+        amplitude = rng.choice([-1, 1]) * (cfg.track_width_m / 2 + cfg.vehicle.width_m / 2 + rng.uniform(2.0, 6.0))
+        inside = (s > start) & (s < start + length)
+        offset[inside] += amplitude * 0.5 * (1 - np.cos(2 * np.pi * (s[inside] - start) / length))
+    xz = drive.xz + offset[:, None] * drive.normal()
+    d = np.gradient(xz, axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 0], d[:, 1]))
+    return Curve(xz=xz, heading=heading, curvature=np.gradient(heading) / ARC_STEP_M)
+
+
+def _forks(rng: np.random.Generator, track: Curve, per_100m: float) -> list[Curve]:
+    """Side tracks branching off the track that the vehicle does not take."""
+    forks = []
+    for _ in range(rng.poisson(per_100m * track.length / 100.0)):
+        i = int(rng.uniform(0.1, 0.9) * (len(track.xz) - 1))
+        angle = track.heading[i] + rng.choice([-1, 1]) * rng.uniform(0.4, 1.1)
+        n = int(rng.uniform(40.0, 90.0) / ARC_STEP_M)
+        curvature = 0.02 * smooth_random(rng, np.arange(n) * ARC_STEP_M, (30.0, 80.0), 2)
+        heading = angle + np.concatenate([[0.0], np.cumsum(curvature[:-1]) * ARC_STEP_M])
+        steps = ARC_STEP_M * np.stack([np.sin(heading), np.cos(heading)], axis=1)
+        xz = track.xz[i] + np.cumsum(steps, axis=0)
+        forks.append(Curve(xz=xz, heading=heading, curvature=curvature))
+    return forks
+
+
+def _polyline_mask(grid: Grid, xz: np.ndarray, width_m: float) -> np.ndarray:
+    mask = np.zeros(grid.shape, np.uint8)
+    pts = np.rint(grid.to_pixel(xz[::4]) * 16).astype(np.int32)  # 4 fractional bits
+    cv2.polylines(mask, [pts], False, 255, max(1, int(round(width_m / grid.step))), cv2.LINE_8, shift=4)
+    return mask
+
+
+def _paint_ragged(rng: np.random.Generator, materials: np.ndarray, grid: Grid, xz: np.ndarray, width_m: float, cls: int) -> None:
+    """Paint a band of `cls` along a polyline, with edges frayed by noise like a worn track."""
+    mask = _polyline_mask(grid, xz, width_m)
+    ys, xs = np.nonzero(cv2.dilate(mask, np.ones((15, 15), np.uint8)))
+    if len(ys) == 0:
+        return
+    r0, r1, c0, c1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    window = cv2.GaussianBlur(mask[r0:r1, c0:c1].astype(np.float32) / 255.0, (0, 0), 3.0)
+    window += 0.3 * value_noise(rng, window.shape, 0.35 / grid.step)
+    materials[r0:r1, c0:c1][window > 0.5] = cls
+
+
+def _paint_paved(rng: np.random.Generator, materials: np.ndarray, grid: Grid, track: Curve, cfg: WorldConfig) -> None:
+    """Some stretches of the track are paved, and there may be a paved pad beside it."""
+    length = track.length
+    paved = 0.0
+    while paved < cfg.paved_fraction * length * rng.uniform(0.3, 1.7):
+        start = rng.uniform(0.0, length)
+        span = rng.uniform(8.0, 25.0)
+        i0, i1 = int(start / ARC_STEP_M), int(min(start + span, length) / ARC_STEP_M)
+        if i1 - i0 > 2:
+            mask = _polyline_mask(grid, track.xz[i0:i1], cfg.track_width_m + 0.4)
+            materials[mask > 0] = PAVED
+        paved += span
+    if rng.uniform() < 0.5:
+        i = int(rng.uniform(0.2, 0.8) * (len(track.xz) - 1))
+        centre = track.xz[i] + track.normal()[i] * rng.choice([-1, 1]) * rng.uniform(6.0, 12.0)
+        size = rng.uniform(5.0, 12.0, 2)
+        box = cv2.boxPoints(((*grid.to_pixel(centre[None])[0],), tuple(size / grid.step), rng.uniform(0, 180)))
+        cv2.fillConvexPoly(materials, np.rint(box).astype(np.int32), PAVED)
+
+
+def _puddles(rng: np.random.Generator, track: Curve, per_100m: float, width_m: float) -> list:
+    out = []
+    for _ in range(rng.poisson(per_100m * track.length / 100.0)):
+        i = int(rng.uniform(0.02, 0.95) * (len(track.xz) - 1))
+        centre = track.xz[i] + track.normal()[i] * rng.uniform(-0.3, 0.3) * width_m
+        axes = (rng.uniform(0.6, 2.2), rng.uniform(0.4, 1.2))
+        out.append((centre, axes, float(rng.uniform(0, 180))))
+    return out
+
+
+def _flatten_puddles(heights: np.ndarray, grid: Grid, puddles: list) -> np.ndarray:
+    """Water lies flat: set the terrain under each puddle to one level, blended at the rim."""
+    for centre, axes, angle in puddles:
+        mask = np.zeros(grid.shape, np.uint8)
+        c = tuple(int(v) for v in np.rint(grid.to_pixel(centre[None])[0]))
+        ax = tuple(int(np.ceil((a + 0.3) / grid.step)) for a in axes)
+        cv2.ellipse(mask, c, ax, angle, 0, 360, 255, -1)
+        inside = mask > 0
+        if not inside.any():
+            continue
+        level = heights[inside].mean() - 0.04
+        weight = cv2.GaussianBlur(inside.astype(np.float32), (0, 0), 0.4 / grid.step)
+        weight = np.maximum(weight, inside)
+        heights = heights + weight * (level - heights)
+    return heights
+
+
+def _sky(rng: np.random.Generator, cfg: WorldConfig) -> Sky:
+    elevation = np.deg2rad(rng.uniform(*cfg.sun_elevation_deg))
+    azimuth = rng.uniform(0, 2 * np.pi)
+    sun = np.array([np.cos(elevation) * np.sin(azimuth), -np.sin(elevation), np.cos(elevation) * np.cos(azimuth)])
+    zenith = np.array([0.25, 0.45, 0.85]) * rng.uniform(0.8, 1.1)
+    horizon = np.array([0.75, 0.82, 0.90]) * rng.uniform(0.85, 1.05)
+    return Sky(sun=sun, zenith=zenith, horizon=horizon, cloud_cover=float(rng.uniform(0.2, 0.7)))
+
+
+def _palette(rng: np.random.Generator) -> np.ndarray:
+    palette = np.zeros((8, 3))
+    for cls, rgb in BASE_COLORS.items():
+        palette[cls] = np.clip(np.asarray(rgb) * rng.uniform(0.8, 1.2) * rng.uniform(0.9, 1.1, 3), 0.02, 1.0)
+    return palette
+
+
+def _textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Tileable detail: `fine` at 1 cm per texel (5.12 m tile), `coarse` at 8 cm (41 m tile)."""
+    def octaves(cells: tuple[float, ...]) -> np.ndarray:
+        size = 512
+        out = np.zeros((size, size), np.float32)
+        for i, cell in enumerate(cells):
+            n = size // int(cell)
+            coarse = rng.uniform(-1, 1, (n, n)).astype(np.float32)
+            tiled = np.tile(coarse, (3, 3))  # resize a 3x3 tiling and keep the centre: seamless wrap
+            big = cv2.resize(tiled, (3 * size, 3 * size), interpolation=cv2.INTER_CUBIC)
+            out += big[size : 2 * size, size : 2 * size] * 0.85**i
+        return out / out.std()  # unit standard deviation
+
+    def wrapped_blur(tex: np.ndarray, sigma: float) -> np.ndarray:
+        size = tex.shape[0]
+        return cv2.GaussianBlur(np.tile(tex, (3, 3)), (0, 0), sigma)[size : 2 * size, size : 2 * size]
+
+    fine = octaves((64, 16, 4, 2))
+    return {
+        "fine0": fine,
+        "fine1": wrapped_blur(fine, 2.0),
+        "fine2": wrapped_blur(fine, 6.0),
+        "coarse": octaves((128, 32, 8)),
+        "cloud": octaves((128, 64, 16, 4)),
+    }
+
+
+def _objects(rng: np.random.Generator, cfg: WorldConfig, terrain: Terrain, drive: Curve, track: Curve, density: np.ndarray) -> Objects:
+    grid = terrain.grid
+    keep_clear = _polyline_mask(grid, drive.xz, cfg.vehicle.width_m + 2.5) > 0
+    on_track = _polyline_mask(grid, track.xz, cfg.track_width_m + 1.0) > 0
+    objects = Objects()
+    area_ha = grid.shape[0] * grid.shape[1] * grid.step**2 / 1e4
+
+    def free_points(n: int, blocked: np.ndarray) -> np.ndarray:
+        xz = rng.uniform([grid.x0, grid.z0], [grid.x0 + grid.shape[1] * grid.step, grid.z0 + grid.shape[0] * grid.step], (n, 2))
+        row, col = grid.nearest(xz[:, 0], xz[:, 1])
+        return xz[~blocked[row, col]]
+
+    def ground_y(xz: np.ndarray) -> float:
+        return -float(terrain.elevation(np.array([xz[0]]), np.array([xz[1]]))[0])
+
+    blocked = keep_clear | on_track
+    for xz in free_points(rng.poisson(cfg.trees_per_hectare * density[2] * area_ha), blocked):
+        y = ground_y(xz)
+        trunk_r, trunk_h = rng.uniform(0.12, 0.3), rng.uniform(1.8, 4.0)
+        crown_r = rng.uniform(1.2, 2.8)
+        objects.add_cylinder(xz[0], xz[1], y - trunk_h - 0.5 * crown_r, y + 0.3, trunk_r, TREE, np.asarray(TRUNK_COLOR))
+        crown_colour = np.asarray(BASE_COLORS[TREE]) * rng.uniform(0.7, 1.3)
+        objects.add_sphere(np.array([xz[0], y - trunk_h - 0.6 * crown_r, xz[1]]), crown_r, TREE, crown_colour)
+    for xz in free_points(rng.poisson(cfg.bushes_per_hectare * density[3] * area_ha), blocked):
+        r = rng.uniform(0.35, 1.1)
+        colour = np.asarray(BASE_COLORS[FOLIAGE]) * rng.uniform(0.7, 1.4)
+        objects.add_sphere(np.array([xz[0], ground_y(xz) - 0.35 * r, xz[1]]), r, FOLIAGE, colour)
+    _man_made(rng, cfg, objects, drive, keep_clear, grid, ground_y)
+    return objects
+
+
+def _man_made(rng, cfg: WorldConfig, objects: Objects, drive: Curve, keep_clear: np.ndarray, grid: Grid, ground_y) -> None:
+    """Posts, boxes and fences near the drive: obstacles the path has to avoid."""
+    normal = drive.normal()
+    n = rng.poisson(cfg.obstacles_per_100m * drive.length / 100.0)
+    for _ in range(n):
+        i = int(rng.uniform(0.0, 1.0) * (len(drive.xz) - 1))
+        side = rng.choice([-1, 1])
+        xz = drive.xz[i] + normal[i] * side * rng.uniform(cfg.vehicle.width_m / 2 + 1.5, 10.0)
+        row, col = grid.nearest(xz[:1], xz[1:])
+        if keep_clear[row[0], col[0]]:
+            continue
+        y = ground_y(xz)
+        grey = rng.uniform(0.3, 0.8)
+        colour = np.asarray(BASE_COLORS[OBSTACLE]) * grey / 0.5 * rng.uniform(0.85, 1.15, 3)
+        kind = rng.choice(["post", "box", "fence"], p=[0.35, 0.35, 0.3])
+        if kind == "post":
+            objects.add_cylinder(xz[0], xz[1], y - rng.uniform(0.8, 1.5), y + 0.2, rng.uniform(0.06, 0.15), OBSTACLE, colour)
+        elif kind == "box":
+            half = rng.uniform([0.25, 0.2, 0.25], [0.7, 0.6, 0.9])
+            objects.add_box(np.array([xz[0], y - half[1] + 0.05, xz[1]]), half, rng.uniform(0, np.pi), OBSTACLE, colour)
+        else:
+            _fence(rng, objects, drive, i, side, cfg, keep_clear, grid, ground_y, colour)
+
+
+def _fence(rng, objects, drive: Curve, i: int, side: int, cfg: WorldConfig, keep_clear, grid: Grid, ground_y, colour) -> None:
+    offset = side * rng.uniform(cfg.vehicle.width_m / 2 + 2.0, 7.0)
+    span_steps = int(rng.uniform(8.0, 20.0) / ARC_STEP_M)
+    post_every = int(2.5 / ARC_STEP_M)
+    posts = []
+    for j in range(i, min(i + span_steps, len(drive.xz) - 1), post_every):
+        xz = drive.xz[j] + drive.normal()[j] * offset
+        row, col = grid.nearest(xz[:1], xz[1:])
+        if keep_clear[row[0], col[0]]:
+            break
+        posts.append((xz, ground_y(xz)))
+        objects.add_box(np.array([xz[0], posts[-1][1] - 0.55, xz[1]]), np.array([0.06, 0.6, 0.06]), drive.heading[j], OBSTACLE, colour)
+    for (a, ya), (b, yb) in zip(posts[:-1], posts[1:], strict=False):
+        mid, length = (a + b) / 2, np.linalg.norm(b - a)
+        yaw = np.arctan2(-(b[1] - a[1]), b[0] - a[0])  # rail's local x, (cos, 0, -sin), along a -> b
+        for height in (0.45, 0.95):
+            y = (ya + yb) / 2 - height
+            objects.add_box(np.array([mid[0], y, mid[1]]), np.array([length / 2, 0.05, 0.025]), yaw, OBSTACLE, colour * 0.9)
+
+
+def _shadow_map(grid: Grid, terrain: Terrain, objects: Objects, sun: np.ndarray) -> np.ndarray:
+    """Where objects shade the ground: each object's silhouette cast along the sun onto its base level."""
+    shadow = np.full(grid.shape, 255, np.uint8)
+    up = -sun[1]
+    along = np.array([-sun[0], -sun[2]]) / up  # ground displacement per metre of height above it
+
+    def cast(points: np.ndarray) -> None:  # points (N, 3) world; shadow of their convex hull
+        xz = points[:, [0, 2]]
+        base = -terrain.elevation(xz[:, 0], xz[:, 1])
+        height = np.maximum(base - points[:, 1], 0.0)
+        shadow_xz = xz + height[:, None] * along
+        px = np.rint(grid.to_pixel(np.concatenate([shadow_xz, xz[height < 0.05]])) * 16).astype(np.int32)
+        cv2.fillConvexPoly(shadow, cv2.convexHull(px), 0, cv2.LINE_AA, shift=4)
+
+    ring = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    for kind, p in zip(objects.kind, objects.params, strict=True):
+        if kind == 0:
+            cx, cy, cz, r = p
+            # The sphere's silhouette seen from the sun: its rim perpendicular to the sun.
+            e1 = np.cross(sun, [0.0, 1.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(sun, e1)
+            pts = np.array([cx, cy, cz]) + r * (np.cos(ring)[:, None] * e1 + np.sin(ring)[:, None] * e2)
+        elif kind == 1:
+            x, z, y_top, y_bottom, r = p
+            circle = np.stack([x + r * np.cos(ring), z + r * np.sin(ring)], axis=1)
+            pts = np.concatenate([
+                np.stack([circle[:, 0], np.full(16, y_top), circle[:, 1]], axis=1),
+                np.stack([circle[:, 0], np.full(16, y_bottom), circle[:, 1]], axis=1),
+            ])
+        else:
+            centre, half, yaw = np.array(p[:3]), np.array(p[3:6]), p[6]
+            c, s = np.cos(yaw), np.sin(yaw)
+            rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # box to world
+            corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)]) * half
+            pts = centre + corners @ rot.T
+        cast(pts)
+    soft = cv2.GaussianBlur(shadow, (0, 0), 0.08 / grid.step)
+    return soft.astype(np.float32) / 255.0
