@@ -20,8 +20,8 @@ from offroad_path.world.terrain import Terrain, sample_bilinear
 NEAR_M = 0.3
 RELAX = 0.02  # march step at least 2 % of the distance: thinner distant bumps than that are skipped
 MIN_STEP_M = 0.02
-BISECTIONS = 3
-REFINEMENTS = 6
+BISECTIONS = 4
+REFINEMENTS = 8
 FOG_DISTANCE_M = 220.0
 TEXTURE_CONTRAST = np.array([0.0, 0.05, 0.45, 0.15, 0.5, 0.5, 0.4, 0.2])  # per class
 
