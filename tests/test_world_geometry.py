@@ -38,7 +38,14 @@ def project(camera, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sample(image: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return cv2.remap(image.astype(np.float32), u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return cv2.remap(
+        image.astype(np.float32),
+        u.astype(np.float32),
+        v.astype(np.float32),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
 
 
 def test_ground_pixels_lie_on_the_terrain(rendered):
@@ -68,8 +75,8 @@ def _warp(rendered, pose_error: np.ndarray | None = None):
 
 
 def test_depth_and_pose_reproject_to_subpixel(rendered):
-    _, world, camera, views, _ = rendered
-    a, b, u, v, pts, inside, visible = _warp(rendered)
+    _, world, camera, _views, _ = rendered
+    _a, b, u, v, _pts, inside, visible = _warp(rendered)
     assert visible.sum() > 0.85 * inside.sum()  # a forward move hides little of the view
     # The point that frame k+1 itself sees at the warped pixel, carried back into frame k.
     depth_b = sample(b.depth, u, v)
@@ -91,7 +98,7 @@ def test_depth_warp_reproduces_the_next_frame(rendered):
     # Control: the same warp with the pose off by 10 cm sideways must look clearly worse.
     nudge = np.eye(4)
     nudge[0, 3] = 0.10
-    a2, b2, u2, v2, _, _, visible2 = _warp(rendered, nudge)
+    _a2, _b2, u2, v2, _, _, visible2 = _warp(rendered, nudge)
     wrong = np.abs(sample(grey_b, u2, v2) - grey_a)[visible2]
     assert np.median(error) < 3.0  # grey levels; what is left is shading and texture filtering
     assert np.median(wrong) > 2 * np.median(error)
@@ -122,7 +129,9 @@ def test_stereo_sgbm_recovers_ground_truth_disparity(rendered):
     left = views[FRAMES[0]]
     grey_l = cv2.cvtColor(left.image, cv2.COLOR_RGB2GRAY)
     grey_r = cv2.cvtColor(right.image, cv2.COLOR_RGB2GRAY)
-    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=64, blockSize=5, P1=8 * 25, P2=32 * 25, uniquenessRatio=10, speckleWindowSize=100, speckleRange=2)
+    sgbm = cv2.StereoSGBM_create(
+        minDisparity=0, numDisparities=64, blockSize=5, P1=8 * 25, P2=32 * 25, uniquenessRatio=10, speckleWindowSize=100, speckleRange=2
+    )
     measured = sgbm.compute(grey_l, grey_r).astype(np.float32) / 16.0
     textured_ground = np.isin(left.semantic, [DIRT, GRASS, PAVED]) & (left.depth > 2) & (left.depth < 30)
     valid = textured_ground & (measured > 0)

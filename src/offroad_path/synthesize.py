@@ -1,6 +1,6 @@
 """Stage `synthesize`: render the embedded synthetic stereo off-road world (see DESIGN.md).
 
-    python -m offroad_path.synthesize [experiment=paper] [world/rig=gopro] [synthesize.sequences=4]
+python -m offroad_path.synthesize [experiment=paper] [world/rig=gopro] [synthesize.sequences=4]
 """
 
 from __future__ import annotations

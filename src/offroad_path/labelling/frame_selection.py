@@ -29,7 +29,7 @@ def select_segments(
         return []
     travelled = np.concatenate([[0.0], np.cumsum(steps)])
     segments = []
-    f0 = int(moving[0])
+    f0 = start = int(moving[0])
     while f0 < len(positions) - 1:
         beyond = np.flatnonzero(np.linalg.norm(positions[f0 + 1 :] - positions[f0], axis=1) > distance_m)
         if len(beyond) == 0:
@@ -39,7 +39,8 @@ def select_segments(
         if strategy == "midway":
             f0 = max((f0 + fn) // 2, f0 + 1)
         else:
-            ahead = np.flatnonzero(travelled >= travelled[f0] + stride_m)
+            # The k-th label starts k strides along the path from the first: no rounding drift.
+            ahead = np.flatnonzero(travelled >= travelled[start] + (len(segments) * stride_m) - 1e-9)
             if len(ahead) == 0:
                 break
             f0 = int(ahead[0])

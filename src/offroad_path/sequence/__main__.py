@@ -24,7 +24,9 @@ def describe(path: str) -> list[str]:
         travelled = "no poses"
         if seq.poses is not None:
             travelled = f"{np.linalg.norm(np.diff(seq.poses[:, :3, 3], axis=0), axis=1).sum():.1f} m of poses"
-        extras = [name for name, value in (("depth", seq.depth), ("semantic", seq.semantic), ("steering", seq.steering)) if value is not None]
+        extras = [
+            name for name, value in (("depth", seq.depth), ("semantic", seq.semantic), ("steering", seq.steering)) if value is not None
+        ]
         lines.append(
             f"{root}: {len(seq)} stereo pairs {w}x{h}, fx {seq.calibration.fx:.1f} px, "
             f"baseline {seq.calibration.baseline_m:.3f} m, {travelled}" + (f", with {', '.join(extras)}" if extras else "")

@@ -107,11 +107,10 @@ def open_sequence(root: str | Path) -> Sequence:
     calib_path = root / "calib.txt"
     if not calib_path.is_file():
         raise SequenceError(calib_path, "is missing")
-    for left_dir, right_dir, keys in LAYOUTS:
-        if (root / left_dir).is_dir():
-            break
-    else:
+    layout = next((layout for layout in LAYOUTS if (root / layout[0]).is_dir()), None)
+    if layout is None:
         raise SequenceError(root, "has no image_l/, image_2/ or image_0/ folder of left images")
+    left_dir, right_dir, keys = layout
     calibration = read_calibration(calib_path, keys)
     left, right = _stereo_pairs(root / left_dir, root / right_dir)
     image_size = _common_size(left + right)
@@ -139,7 +138,11 @@ def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Pat
     if left_names != right_names:
         missing = sorted(set(left_names) - set(right_names))
         extra = sorted(set(right_names) - set(left_names))
-        what = f"lacks {len(missing)} right image(s) of the left ones, first {missing[0]}" if missing else f"has {len(extra)} image(s) with no left partner, first {extra[0]}"
+        what = (
+            f"lacks {len(missing)} right image(s) of the left ones, first {missing[0]}"
+            if missing
+            else f"has {len(extra)} image(s) with no left partner, first {extra[0]}"
+        )
         raise SequenceError(right_dir, f"{what} ({len(left)} left, {len(right)} right)")
     return left, [right_dir / name for name in left_names]
 

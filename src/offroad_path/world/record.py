@@ -121,5 +121,12 @@ def record_sequences(cfg: WorldConfig, count: int, master_seed: int, out_dir: Pa
             results = pool.map(_record_job, jobs, chunksize=1)
     elapsed = time.perf_counter() - start
     frames = sum(r[0]["frames"] for r in results)
-    log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s on %d workers", count, frames, elapsed, frames / elapsed, workers)
+    log.info(
+        "rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s on %d workers",
+        count,
+        frames,
+        elapsed,
+        frames / elapsed,
+        workers,
+    )
     return [r[0] for r in results]

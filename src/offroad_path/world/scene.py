@@ -6,6 +6,7 @@ Everything is drawn from one seed, so a world is a pure function of (config, see
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import cv2
@@ -170,7 +171,7 @@ def _forks(rng: np.random.Generator, track: Curve, per_100m: float) -> list[Curv
 def _polyline_mask(grid: Grid, xz: np.ndarray, width_m: float) -> np.ndarray:
     mask = np.zeros(grid.shape, np.uint8)
     pts = np.rint(grid.to_pixel(xz[::4]) * 16).astype(np.int32)  # 4 fractional bits
-    cv2.polylines(mask, [pts], False, 255, max(1, int(round(width_m / grid.step))), cv2.LINE_8, shift=4)
+    cv2.polylines(mask, [pts], False, 255, max(1, round(width_m / grid.step)), cv2.LINE_8, shift=4)
     return mask
 
 
@@ -251,6 +252,7 @@ def _palette(rng: np.random.Generator) -> np.ndarray:
 
 def _textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Tileable detail: `fine` at 1 cm per texel (5.12 m tile), `coarse` at 8 cm (41 m tile)."""
+
     def octaves(cells: tuple[float, ...]) -> np.ndarray:
         size = 512
         out = np.zeros((size, size), np.float32)
@@ -343,7 +345,7 @@ def _fence(rng, objects, drive: Curve, i: int, side: int, cfg: WorldConfig, keep
             break
         posts.append((xz, ground_y(xz)))
         objects.add_box(np.array([xz[0], posts[-1][1] - 0.55, xz[1]]), np.array([0.06, 0.6, 0.06]), drive.heading[j], OBSTACLE, colour)
-    for (a, ya), (b, yb) in zip(posts[:-1], posts[1:], strict=False):
+    for (a, ya), (b, yb) in itertools.pairwise(posts):
         mid, length = (a + b) / 2, np.linalg.norm(b - a)
         yaw = np.arctan2(-(b[1] - a[1]), b[0] - a[0])  # rail's local x, (cos, 0, -sin), along a -> b
         for height in (0.45, 0.95):
@@ -377,10 +379,12 @@ def _shadow_map(grid: Grid, terrain: Terrain, objects: Objects, sun: np.ndarray)
         elif kind == 1:
             x, z, y_top, y_bottom, r = p
             circle = np.stack([x + r * np.cos(ring), z + r * np.sin(ring)], axis=1)
-            pts = np.concatenate([
-                np.stack([circle[:, 0], np.full(16, y_top), circle[:, 1]], axis=1),
-                np.stack([circle[:, 0], np.full(16, y_bottom), circle[:, 1]], axis=1),
-            ])
+            pts = np.concatenate(
+                [
+                    np.stack([circle[:, 0], np.full(16, y_top), circle[:, 1]], axis=1),
+                    np.stack([circle[:, 0], np.full(16, y_bottom), circle[:, 1]], axis=1),
+                ]
+            )
         else:
             centre, half, yaw = np.array(p[:3]), np.array(p[3:6]), p[6]
             c, s = np.cos(yaw), np.sin(yaw)

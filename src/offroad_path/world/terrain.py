@@ -100,9 +100,7 @@ class Terrain:
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def fourier_hills(
-    rng: np.random.Generator, grid: Grid, height_m: float, wavelengths_m: tuple[float, float], count: int
-) -> np.ndarray:
+def fourier_hills(rng: np.random.Generator, grid: Grid, height_m: float, wavelengths_m: tuple[float, float], count: int) -> np.ndarray:
     """Sum of randomly oriented cosines: smooth hills of roughly `height_m` peak to trough."""
     rows, cols = grid.shape
     x = grid.x0 + np.arange(cols) * grid.step

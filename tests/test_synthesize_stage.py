@@ -1,0 +1,84 @@
+"""The synthesize stage against the sequence contract of DESIGN.md, and its configuration."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+from hydra.errors import ConfigCompositionException
+
+from offroad_path.sequence import open_sequence
+from offroad_path.synthesize import synthesize
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.world.classes import CLASS_NAMES
+
+TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.height=96", "synthesize.workers=2")
+
+
+def test_writes_the_sequence_contract(compose_config, tmp_path):
+    out = tmp_path / "synthetic"
+    out.mkdir()
+    (out / "stale.txt").write_text("from an earlier run")
+    cfg = compose_config(*TINY, f"synthesize.out_dir={out}", "world/rig=gopro")
+    synthesize(cfg)
+    assert sorted(p.name for p in out.iterdir()) == ["seq_000", "seq_001", "summary.json"]  # rewritten whole
+    assert not list(tmp_path.glob(".synthetic*"))  # no temporary leftovers
+    seq = open_sequence(out / "seq_000")
+    assert len(seq) == 3 and seq.image_size == (160, 96)
+    assert seq.calibration.baseline_m == pytest.approx(0.40)
+    # 80 degrees horizontal field of view, principal point at the image centre.
+    assert 2 * np.degrees(np.arctan(80 / seq.calibration.fx)) == pytest.approx(80.0)
+    np.testing.assert_allclose(seq.poses[0], np.eye(4), atol=1e-9)
+    np.testing.assert_allclose(seq.times, np.arange(3) / cfg.world.fps)
+    assert np.all(np.abs(seq.steering) <= 1)
+    depth_raw = cv2.imread(str(seq.depth[0]), cv2.IMREAD_UNCHANGED)
+    assert depth_raw.dtype == np.uint16
+    semantic = seq.load_semantic(0)
+    sky = semantic == CLASS_NAMES.index("sky")
+    assert np.all(depth_raw[sky] == 0) and np.all(depth_raw[~sky] > 0)
+    assert semantic.max() < len(CLASS_NAMES)
+    meta = seq.meta
+    assert meta["baseline_m"] == 0.40 and meta["camera_height_m"] == 1.8 and meta["rig"] == "gopro_pair"
+    assert meta["footprint_front_m"] > 0 > meta["footprint_rear_m"]
+    # world_from_first_camera maps the first camera's frame into the gravity-aligned world.
+    world_from_cam = np.array(meta["world_from_first_camera"])
+    np.testing.assert_allclose(world_from_cam[:3, :3] @ world_from_cam[:3, :3].T, np.eye(3), atol=1e-9)
+    summary = json.loads((out / "summary.json").read_text())
+    assert [s["frames"] for s in summary["sequences"]] == [3, 3]
+
+
+def test_atomic_directory_keeps_the_old_output_on_failure(tmp_path):
+    target = tmp_path / "out"
+    target.mkdir()
+    (target / "good.txt").write_text("previous complete run")
+    with pytest.raises(RuntimeError), atomic_directory(target) as tmp:
+        (tmp / "half.txt").write_text("partial")
+        raise RuntimeError("interrupted")
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+    assert [p.name for p in target.iterdir()] == ["good.txt"]
+
+
+@pytest.mark.parametrize(
+    ("override", "named"),
+    [("world.hil_height_m=3", "hil_height_m"), ("world.frames=many", "frames"), ("world/rig=zed", "world/rig")],
+)
+def test_config_errors_name_the_key(compose_config, override, named):
+    with pytest.raises(ConfigCompositionException) as info:
+        compose_config(override)
+    assert named in str(info.value) + str(info.value.__cause__)
+
+
+def test_cli_refuses_a_misspelt_key_before_any_work(tmp_path):
+    out = tmp_path / "never"
+    run = subprocess.run(
+        [sys.executable, "-m", "offroad_path.synthesize", "world.hil_height_m=3", f"synthesize.out_dir={out}"],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode != 0
+    assert "hil_height_m" in run.stderr
+    assert not out.exists()
