@@ -26,6 +26,7 @@ log = logging.getLogger(__name__)
 
 DEPTH_MAX_MM = 65535
 PNG_OPTIONS = [cv2.IMWRITE_PNG_COMPRESSION, 3]
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def sequence_seed(master_seed: int, index: int) -> int:
@@ -117,8 +118,19 @@ def record_sequences(cfg: WorldConfig, count: int, master_seed: int, out_dir: Pa
     if workers == 1 or count == 1:
         results = [_record_job(job) for job in jobs]
     else:
-        with mp.get_context("fork").Pool(min(workers, count)) as pool:
-            results = pool.map(_record_job, jobs, chunksize=1)
+        # One single-threaded process per core. The variables must be set before the workers
+        # import numpy, hence spawn: BLAS threads in every worker would fight over the cores.
+        saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
+        os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
+        try:
+            with mp.get_context("spawn").Pool(min(workers, count)) as pool:
+                results = pool.map(_record_job, jobs, chunksize=1)
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
     elapsed = time.perf_counter() - start
     frames = sum(r[0]["frames"] for r in results)
     log.info(
