@@ -23,6 +23,8 @@ MIN_STEP_M = 0.02
 BISECTIONS = 4
 REFINEMENTS = 8
 FOG_DISTANCE_M = 220.0
+# Linear light to 8-bit sRGB-like gamma 2.2; a table is much faster than a power per channel.
+GAMMA = np.clip(255.0 * np.linspace(0.0, 1.0, 16384) ** (1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
 TEXTURE_CONTRAST = np.array([0.0, 0.05, 0.45, 0.15, 0.5, 0.5, 0.4, 0.2])  # per class
 
 
@@ -210,42 +212,46 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     hit = np.isfinite(t) & (t < max_t)
     t = np.where(hit, t, 0.0)
 
-    points = origin + t[:, None] * dirs
-    semantic = np.full(len(dirs), SKY, np.uint8)
-    albedo = np.zeros((len(dirs), 3))
-    normal = np.zeros((len(dirs), 3))
-    ground = hit & ~use_obj
-    obj = hit & use_obj
-    g = np.flatnonzero(ground)
-    row, col = world.material_grid.nearest(points[g, 0], points[g, 2])
-    semantic[g] = world.materials[row, col]
-    albedo[g] = world.palette[semantic[g]]
-    normal[g] = world.terrain.normals(points[g, 0], points[g, 2])
-    o = np.flatnonzero(obj)
-    semantic[o] = world.objects.arrays().cls[obj_index[o]]
-    albedo[o] = world.objects.arrays().color[obj_index[o]]
-    normal[o] = n_obj[o]
-
-    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-    rgb = np.empty((len(dirs), 3))
-    sky = np.flatnonzero(~hit)
-    rgb[sky] = _sky_colour(world, unit[sky])
     lit = np.flatnonzero(hit)
-    footprint = t[lit] / camera.fx / np.maximum(np.abs(np.einsum("ij,ij->i", unit[lit], normal[lit])), 0.25)
-    detail = _detail(world, points[lit], semantic[lit], footprint, ground[lit])
-    sun_vis = np.ones(len(lit))
-    sun_vis[ground[lit]] = sample_bilinear(world.shadow, *world.material_grid.coords(points[g, 0], points[g, 2]))
-    sun = np.maximum(normal[lit] @ world.sky.sun, 0.0) * sun_vis
-    shade = 0.35 * world.sky.zenith + 0.9 * sun[:, None]
-    colour = albedo[lit] * detail * shade
-    water = semantic[lit] == WATER
-    if water.any():
-        reflected = unit[lit][water] * np.array([1.0, -1.0, 1.0])
-        colour[water] = 0.45 * colour[water] + 0.55 * _sky_colour(world, reflected) * (0.4 + 0.6 * sun_vis[water, None])
-    fog = 1.0 - np.exp(-t[lit] * np.linalg.norm(dirs[lit], axis=1) / FOG_DISTANCE_M)
-    rgb[lit] = colour * (1 - fog[:, None]) + world.sky.horizon * fog[:, None]
+    t_lit, d_lit = t[lit], dirs[lit]
+    points = origin + t_lit[:, None] * d_lit
+    ground = ~use_obj[lit]
+    g, o = np.flatnonzero(ground), np.flatnonzero(~ground)
+    cls = np.empty(len(lit), np.uint8)
+    albedo = np.empty((len(lit), 3))
+    normal = np.empty((len(lit), 3))
+    row, col = world.material_grid.nearest(points[g, 0], points[g, 2])
+    cls[g] = world.materials[row, col]
+    albedo[g] = world.palette[cls[g]]
+    normal[g] = world.terrain.normals(points[g, 0], points[g, 2])
+    objects = world.objects.arrays()
+    which = obj_index[lit[o]]
+    cls[o] = objects.cls[which]
+    albedo[o] = objects.color[which]
+    normal[o] = n_obj[lit[o]]
+    semantic = np.full(len(dirs), SKY, np.uint8)
+    semantic[lit] = cls
 
-    image = np.clip(255.0 * np.clip(rgb, 0, 1) ** (1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
+    distance = np.linalg.norm(d_lit, axis=1)
+    unit = d_lit / distance[:, None]
+    footprint = t_lit / camera.fx / np.maximum(np.abs(np.einsum("ij,ij->i", unit, normal)), 0.25)
+    detail = _detail(world, points, cls, footprint, ground)
+    sun_vis = np.ones(len(lit))
+    sun_vis[g] = sample_bilinear(world.shadow, *world.material_grid.coords(points[g, 0], points[g, 2]))
+    sun = np.maximum(normal @ world.sky.sun, 0.0) * sun_vis
+    colour = albedo * detail * (0.35 * world.sky.zenith + 0.9 * sun[:, None])
+    water = np.flatnonzero(cls == WATER)
+    if len(water):
+        reflected = unit[water] * np.array([1.0, -1.0, 1.0])
+        colour[water] = 0.45 * colour[water] + 0.55 * _sky_colour(world, reflected) * (0.4 + 0.6 * sun_vis[water, None])
+    fog = 1.0 - np.exp(-t_lit * distance / FOG_DISTANCE_M)
+    rgb = np.empty((len(dirs), 3))
+    rgb[lit] = colour * (1 - fog[:, None]) + world.sky.horizon * fog[:, None]
+    sky = np.flatnonzero(~hit)
+    sky_dirs = dirs[sky]
+    rgb[sky] = _sky_colour(world, sky_dirs / np.linalg.norm(sky_dirs, axis=1, keepdims=True))
+
+    image = GAMMA[(np.clip(rgb, 0.0, 1.0) * (len(GAMMA) - 1) + 0.5).astype(np.int32)]
     shape = (camera.height, camera.width)
     return View(image=image.reshape(*shape, 3), depth=t.reshape(shape), semantic=semantic.reshape(shape))
 
