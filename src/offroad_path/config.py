@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from offroad_path.odometry.stereo_vo import OdometryConfig
+
 
 @dataclass
 class RigConfig:
@@ -68,11 +70,65 @@ class SynthesizeConfig:
 
 
 @dataclass
+class PosesConfig:
+    source: str = "vo"  # vo: stereo visual odometry; file: a KITTI-format pose file per sequence
+    # With source=file: a path pattern with {name} (the sequence folder's name), or None for
+    # the sequence's own poses (poses.txt, or KITTI's poses/XX.txt).
+    file: str | None = None
+
+
+@dataclass
+class OcclusionConfig:
+    enabled: bool = True  # beyond the paper: no path label on ground hidden behind a crest or obstacle
+    margin_m: float = 1.0
+    margin_rel: float = 0.1
+
+
+@dataclass
+class FootprintConfig:
+    """The vehicle's ground footprint relative to the camera; None: take it from meta.json."""
+
+    width_m: float | None = None
+    front_m: float | None = None
+    rear_m: float | None = None
+    camera_height_m: float | None = None
+    camera_pitch_deg: float | None = None
+
+
+@dataclass
+class DisparityConfig:
+    """OpenCV StereoSGBM on the f0 pair; the disparity is written beside each label."""
+
+    num_disparities: int = 64  # a multiple of 16
+    block_size: int = 5
+    uniqueness_ratio: int = 10
+    speckle_window: int = 100
+    speckle_range: int = 2
+
+
+@dataclass
 class LabelConfig:
+    in_dir: str = "data/synthetic"
+    out_dir: str = "data/labels"
+    metrics_path: str = "metrics/label.json"
     distance_m: float = 20.0
     strategy: str = "midway"  # midway | stride
     stride_m: float = 5.0
     min_motion_m: float = 0.01
+    poses: PosesConfig = field(default_factory=PosesConfig)
+    occlusion: OcclusionConfig = field(default_factory=OcclusionConfig)
+    footprint: FootprintConfig = field(default_factory=FootprintConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    disparity: DisparityConfig = field(default_factory=DisparityConfig)
+    workers: int = 0
+
+
+@dataclass
+class MlflowConfig:
+    enabled: bool = True
+    experiment: str = "offroad-path"
+    # None: $MLFLOW_TRACKING_URI if set, else sqlite:///mlflow.db at the project root.
+    tracking_uri: str | None = None
 
 
 @dataclass
@@ -80,6 +136,7 @@ class Config:
     world: WorldConfig = field(default_factory=WorldConfig)
     synthesize: SynthesizeConfig = field(default_factory=SynthesizeConfig)
     label: LabelConfig = field(default_factory=LabelConfig)
+    mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = "laptop"
 
 

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import logging
-import multiprocessing as mp
-import os
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -18,6 +16,7 @@ from offroad_path import __version__
 from offroad_path.config import WorldConfig
 from offroad_path.sequence.calibration import StereoCalibration
 from offroad_path.sequence.poses import poses_to_text
+from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.render import PinholeCamera, render_view
 from offroad_path.world.scene import build_world
@@ -26,7 +25,6 @@ log = logging.getLogger(__name__)
 
 DEPTH_MAX_MM = 65535
 PNG_OPTIONS = [cv2.IMWRITE_PNG_COMPRESSION, 3]
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def sequence_seed(master_seed: int, index: int) -> int:
@@ -85,6 +83,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path) -> dict:
         "height": cfg.height,
         "hfov_deg": cfg.hfov_deg,
         "camera_height_m": v.camera_height_m,
+        "camera_pitch_deg": v.camera_pitch_deg,
         "vehicle_width_m": v.width_m,
         # Footprint extent along the camera's forward axis, relative to the camera centre.
         "footprint_front_m": v.length_m / 2 - v.camera_forward_m,
@@ -102,43 +101,18 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path) -> dict:
     return {"name": out_dir.name, "frames": len(world.poses), "distance_m": distance, "class_pixels": class_pixels.tolist()}
 
 
-def _record_job(args: tuple[WorldConfig, int, str]) -> tuple[dict, float]:
+def _record_job(args: tuple[WorldConfig, int, str]) -> dict:
     cv2.setNumThreads(1)  # one process per core: no nested threading
     cfg, seed, out_dir = args
-    start = time.perf_counter()
-    summary = record_sequence(cfg, seed, Path(out_dir))
-    return summary, time.perf_counter() - start
+    return record_sequence(cfg, seed, Path(out_dir))
 
 
 def record_sequences(cfg: WorldConfig, count: int, master_seed: int, out_dir: Path, workers: int = 0) -> list[dict]:
     """Render `count` sequences into out_dir/seq_NNN in parallel, one process per worker."""
-    workers = workers or os.cpu_count() or 1
     jobs = [(cfg, sequence_seed(master_seed, i), str(out_dir / f"seq_{i:03d}")) for i in range(count)]
     start = time.perf_counter()
-    if workers == 1 or count == 1:
-        results = [_record_job(job) for job in jobs]
-    else:
-        # One single-threaded process per core. The variables must be set before the workers
-        # import numpy, hence spawn: BLAS threads in every worker would fight over the cores.
-        saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
-        os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
-        try:
-            with mp.get_context("spawn").Pool(min(workers, count)) as pool:
-                results = pool.map(_record_job, jobs, chunksize=1)
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+    summaries = map_processes(_record_job, jobs, workers)
     elapsed = time.perf_counter() - start
-    frames = sum(r[0]["frames"] for r in results)
-    log.info(
-        "rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s on %d workers",
-        count,
-        frames,
-        elapsed,
-        frames / elapsed,
-        workers,
-    )
-    return [r[0] for r in results]
+    frames = sum(s["frames"] for s in summaries)
+    log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", count, frames, elapsed, frames / elapsed)
+    return summaries

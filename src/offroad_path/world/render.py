@@ -234,7 +234,8 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
 
     distance = np.linalg.norm(d_lit, axis=1)
     unit = d_lit / distance[:, None]
-    footprint = t_lit / camera.fx / np.maximum(np.abs(np.einsum("ij,ij->i", unit, normal)), 0.25)
+    # A pixel's footprint on the surface: the geometric mean of its two axes picks the mip level.
+    footprint = t_lit / camera.fx / np.sqrt(np.maximum(np.abs(np.einsum("ij,ij->i", unit, normal)), 0.1))
     detail = _detail(world, points, cls, footprint, ground)
     sun_vis = np.ones(len(lit))
     sun_vis[g] = sample_bilinear(world.shadow, *world.material_grid.coords(points[g, 0], points[g, 2]))

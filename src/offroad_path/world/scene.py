@@ -268,7 +268,18 @@ def _textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
         size = tex.shape[0]
         return cv2.GaussianBlur(np.tile(tex, (3, 3)), (0, 0), sigma)[size : 2 * size, size : 2 * size]
 
-    fine = octaves((64, 16, 4, 2))
+    def pebbles(count: int, radii: tuple[int, int]) -> np.ndarray:
+        """Sharp-edged stones and tufts: the corners a feature tracker locks on to."""
+        size = 512
+        out = np.zeros((size, size), np.float32)
+        for x, y, r, value in zip(
+            rng.integers(0, size, count), rng.integers(0, size, count), rng.integers(*radii, count), rng.normal(0, 1, count), strict=True
+        ):
+            cv2.circle(out, (int(x), int(y)), int(r), float(value), -1, cv2.LINE_AA)
+        return out
+
+    fine = octaves((64, 16, 4, 2)) + 1.2 * pebbles(2500, (1, 4)) + 1.0 * pebbles(300, (4, 9))
+    fine /= fine.std()
     return {
         "fine0": fine,
         "fine1": wrapped_blur(fine, 2.0),

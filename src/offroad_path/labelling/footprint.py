@@ -1,0 +1,133 @@
+"""The vehicle's future footprint, projected into the image it was seen from (Holder & Breckon
+2018, Sec. III-A): the ground rectangle under the vehicle in frames f1..fn, carried into f0's
+camera by the poses, clipped at the near plane, projected with K and filled, together with the
+area swept between consecutive footprints.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+NEAR_M = 0.3
+SUBPIXEL_BITS = 4
+
+
+@dataclass(frozen=True)
+class VehicleFootprint:
+    width_m: float
+    front_m: float  # front of the vehicle ahead of the camera (along the vehicle's forward axis)
+    rear_m: float  # rear of the vehicle, negative: behind the camera
+    camera_height_m: float  # camera above the ground under the vehicle
+    camera_pitch_deg: float = 0.0  # optical axis tilted down from the vehicle's forward axis
+
+    def corners(self) -> np.ndarray:
+        """Rear-left, rear-right, front-right, front-left on the ground, in the camera frame (4, 3)."""
+        w = self.width_m / 2
+        level = np.array([[-w, self.camera_height_m, self.rear_m], [w, self.camera_height_m, self.rear_m],
+                          [w, self.camera_height_m, self.front_m], [-w, self.camera_height_m, self.front_m]])  # fmt: skip
+        tilt = np.deg2rad(self.camera_pitch_deg)
+        # Vehicle-level (x, down, forward) to the camera pitched down by `tilt` about x.
+        rotation = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(tilt), -np.sin(tilt)], [0.0, np.sin(tilt), np.cos(tilt)]])
+        return level @ rotation.T
+
+
+def clip_near(polygon: np.ndarray, near: float = NEAR_M) -> np.ndarray:
+    """Sutherland-Hodgman clip of a 3D polygon (N, 3) to z >= near; (0, 3) if nothing is left.
+
+    A footprint partly behind the camera keeps only its visible part, instead of being mirrored
+    through the camera centre by the projection.
+    """
+    out = []
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        a_in, b_in = a[2] >= near, b[2] >= near
+        if a_in:
+            out.append(a)
+        if a_in != b_in:
+            s = (near - a[2]) / (b[2] - a[2])
+            out.append(a + s * (b - a))
+    return np.array(out).reshape(-1, 3)
+
+
+def swept_polygons(poses: np.ndarray, f0: int, fn: int, footprint: VehicleFootprint) -> list[np.ndarray]:
+    """Polygons in f0's camera frame covering the ground the vehicle occupies over frames f0+1..fn.
+
+    Each frame's footprint, plus the quads its left and right edges sweep from one frame to the
+    next (on a turn, consecutive rectangles leave gaps at their corners without them).
+    """
+    f0_from_world = np.linalg.inv(poses[f0])
+    corners = np.c_[footprint.corners(), np.ones(4)]
+    frames = [(f0_from_world @ poses[j] @ corners.T).T[:, :3] for j in range(f0 + 1, fn + 1)]
+    polygons = list(frames)
+    for prev, cur in itertools.pairwise(frames):
+        polygons.append(np.array([prev[0], prev[3], cur[3], cur[0]]))  # left edge, rear to front
+        polygons.append(np.array([prev[1], prev[2], cur[2], cur[1]]))  # right edge
+    return polygons
+
+
+def project(K: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return np.stack([K[0, 0] * points[:, 0] / points[:, 2] + K[0, 2], K[1, 1] * points[:, 1] / points[:, 2] + K[1, 2]], axis=1)
+
+
+def footprint_depth(polygons: list[np.ndarray], K: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Depth (z) of the nearest footprint surface per pixel, inf where none; size = (width, height).
+
+    Polygons are clipped at the near plane and cut into triangles (a swept quad spans two frames
+    and need not be planar); each triangle's plane gives the depth of the pixels it covers.
+    """
+    width, height = size
+    depth = np.full((height, width), np.inf)
+    u, v = np.meshgrid(np.arange(width), np.arange(height))
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u, float)], axis=-1)
+    for polygon in polygons:
+        clipped = clip_near(polygon)
+        for i in range(1, len(clipped) - 1):
+            tri = clipped[[0, i, i + 1]]
+            normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+            if np.linalg.norm(normal) < 1e-12:
+                continue
+            uv = np.clip(project(K, tri), -1e6, 1e6)
+            c0, r0 = np.maximum(np.floor(uv.min(axis=0)).astype(int), 0)
+            c1, r1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + 1, (width, height))
+            if c0 >= c1 or r0 >= r1:
+                continue
+            mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
+            pts = np.rint((uv - (c0, r0)) * (1 << SUBPIXEL_BITS)).astype(np.int64).astype(np.int32)
+            cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, shift=SUBPIXEL_BITS)
+            inside = mask.astype(bool)
+            ray = rays[r0:r1, c0:c1][inside]
+            denom = ray @ normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z = np.where(np.abs(denom) > 1e-12, (tri[0] @ normal) / denom, np.inf)
+            window = depth[r0:r1, c0:c1]
+            window[inside] = np.minimum(window[inside], np.where(z > 0, z, np.inf))
+    return depth
+
+
+def path_mask(
+    poses: np.ndarray,
+    f0: int,
+    fn: int,
+    footprint: VehicleFootprint,
+    K: np.ndarray,
+    size: tuple[int, int],
+    measured_depth: np.ndarray | None = None,
+    margin_m: float = 1.0,
+    margin_rel: float = 0.1,
+) -> np.ndarray:
+    """Binary path label (H, W) uint8 0/255 for frame f0.
+
+    With `measured_depth` (z at f0, 0 where unknown), footprint pixels farther than the measured
+    surface by more than margin_m + margin_rel * depth are hidden (behind a crest or an obstacle)
+    and not labelled path.
+    """
+    depth = footprint_depth(swept_polygons(poses, f0, fn, footprint), K, size)
+    path = np.isfinite(depth)
+    if measured_depth is not None:
+        known = measured_depth > 0
+        hidden = known & (depth > measured_depth * (1 + margin_rel) + margin_m)
+        path &= ~hidden
+    return np.where(path, 255, 0).astype(np.uint8)

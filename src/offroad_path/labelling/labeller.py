@@ -1,0 +1,143 @@
+"""Label one stereo sequence: poses (stereo VO or a file), frame selection, footprint labels,
+f0 disparity, and a report of every segment, kept or dropped and why."""
+
+from __future__ import annotations
+
+import csv
+import logging
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from offroad_path.labelling.disparity import compute_disparity, depth_from_disparity, encode_disparity, sgbm
+from offroad_path.labelling.footprint import VehicleFootprint, path_mask
+from offroad_path.labelling.frame_selection import select_segments
+from offroad_path.odometry.stereo_vo import OdometryConfig
+from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
+from offroad_path.sequence.errors import SequenceError
+from offroad_path.sequence.poses import poses_to_text, read_poses
+from offroad_path.sequence.reader import Sequence
+
+log = logging.getLogger(__name__)
+
+POSE_SOURCES = ("vo", "file")
+# Config key -> meta.json key for the vehicle footprint.
+FOOTPRINT_META = {
+    "width_m": "vehicle_width_m",
+    "front_m": "footprint_front_m",
+    "rear_m": "footprint_rear_m",
+    "camera_height_m": "camera_height_m",
+    "camera_pitch_deg": "camera_pitch_deg",
+}
+
+
+@dataclass
+class SegmentReport:
+    f0: int
+    fn: int
+    path_length_m: float  # driven along the poses from f0 to fn
+    distance_m: float  # straight line from f0 to fn
+    min_inliers: int | None  # weakest VO step inside the segment (None: poses from a file)
+    mean_inliers: float | None
+    kept: bool
+    reason: str  # why it was dropped; empty when kept
+    label_pixels: int
+
+
+def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
+    """The vehicle footprint from config, else from the sequence's meta.json."""
+    values = {}
+    for key, meta_key in FOOTPRINT_META.items():
+        value = cfg.get(key)
+        if value is None:
+            value = seq.meta.get(meta_key, 0.0 if key == "camera_pitch_deg" else None)
+        if value is None:
+            raise SequenceError(seq.root / "meta.json", f"gives no {meta_key}: set label.footprint.{key} for this recording")
+        values[key] = float(value)
+    return VehicleFootprint(**values)
+
+
+def poses_for(seq: Sequence, cfg) -> tuple[np.ndarray, OdometryRun | None]:
+    if cfg.poses.source == "vo":
+        run = run_odometry(seq, OdometryConfig(**cfg.odometry))
+        return run.poses, run
+    if cfg.poses.source == "file":
+        path = Path(cfg.poses.file.format(name=seq.name)) if cfg.poses.file else seq.poses_path
+        if path is None:
+            raise SequenceError(seq.root, "has no poses.txt (or poses/XX.txt) for label.poses.source=file")
+        if not path.is_file():
+            raise SequenceError(path, "is missing (label.poses.file)")
+        return read_poses(path, expected_rows=len(seq)), None
+    raise ValueError(f"unknown label.poses.source {cfg.poses.source!r}; valid: {', '.join(POSE_SOURCES)}")
+
+
+def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
+    """Write labels, disparities, poses and reports of one sequence into out_dir; returns a summary."""
+    footprint = footprint_for(seq, cfg.footprint)
+    poses, run = poses_for(seq, cfg)
+    positions = poses[:, :3, 3]
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+    matcher = sgbm(cfg.disparity)
+    K, size = seq.calibration.K, seq.image_size
+    for sub in ("label", "disparity"):
+        (out_dir / sub).mkdir(parents=True)
+
+    reports = []
+    for f0, fn in select_segments(positions, cfg.distance_m, cfg.strategy, cfg.stride_m, cfg.min_motion_m):
+        report = SegmentReport(
+            f0, fn, float(travelled[fn] - travelled[f0]), float(np.linalg.norm(positions[fn] - positions[f0])), None, None, True, "", 0
+        )
+        if run is not None:
+            steps = run.steps[f0:fn]
+            report.min_inliers = min(s.inliers for s in steps)
+            report.mean_inliers = float(np.mean([s.inliers for s in steps]))
+            failed = [k for k in range(f0, fn) if not run.steps[k].ok]
+            if failed:
+                k = failed[0]
+                report.kept = False
+                report.reason = f"odometry failed from frame {k} to {k + 1}: {run.steps[k].reason}"
+                reports.append(report)
+                continue
+        disparity = compute_disparity(matcher, seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
+        measured = depth_from_disparity(disparity, seq.calibration.fx, seq.calibration.baseline_m) if cfg.occlusion.enabled else None
+        mask = path_mask(poses, f0, fn, footprint, K, size, measured, cfg.occlusion.margin_m, cfg.occlusion.margin_rel)
+        report.label_pixels = int(np.count_nonzero(mask))
+        if report.label_pixels == 0:
+            report.kept, report.reason = False, "the footprint falls outside the image"
+        else:
+            name = f"{f0:06d}.png"
+            cv2.imwrite(str(out_dir / "label" / name), mask)
+            cv2.imwrite(str(out_dir / "disparity" / name), encode_disparity(disparity))
+        reports.append(report)
+
+    _write_csv(out_dir / "report.csv", [asdict(r) for r in reports], [f.name for f in fields(SegmentReport)])
+    summary = {
+        "name": seq.name,
+        "frames": len(seq),
+        "poses_source": cfg.poses.source,
+        "segments": len(reports),
+        "kept": sum(r.kept for r in reports),
+        "dropped": sum(not r.kept for r in reports),
+        "drift": None,
+    }
+    if run is not None:
+        (out_dir / "poses_vo.txt").write_text(poses_to_text(poses))
+        rows = [{"from": k, "to": k + 1, "ok": s.ok, "features": s.features, "tracked": s.tracked, "inliers": s.inliers, "reason": s.reason}
+                for k, s in enumerate(run.steps)]  # fmt: skip
+        _write_csv(out_dir / "steps.csv", rows, ["from", "to", "ok", "features", "tracked", "inliers", "reason"])
+        summary["vo_failed_steps"] = int(run.failed.sum())
+        if seq.poses is not None:
+            summary["drift"] = drift(poses, seq.poses, cfg.distance_m)
+    for r in reports:
+        if not r.kept:
+            log.warning("%s: dropped segment %d-%d: %s", seq.name, r.f0, r.fn, r.reason)
+    return summary
+
+
+def _write_csv(path: Path, rows: list[dict], fieldnames: list[str]) -> None:
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fieldnames)
+        writer.writeheader()
+        writer.writerows(rows)
