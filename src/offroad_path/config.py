@@ -80,6 +80,7 @@ class PosesConfig:
 @dataclass
 class OcclusionConfig:
     enabled: bool = True  # beyond the paper: no path label on ground hidden behind a crest or obstacle
+    depth: str = "stereo"  # stereo: from the f0 disparity; ground_truth: the sequence's depth/ (synthetic)
     margin_m: float = 1.0
     margin_rel: float = 0.1
 

@@ -73,6 +73,15 @@ def poses_for(seq: Sequence, cfg) -> tuple[np.ndarray, OdometryRun | None]:
     raise ValueError(f"unknown label.poses.source {cfg.poses.source!r}; valid: {', '.join(POSE_SOURCES)}")
 
 
+def measured_depth(seq: Sequence, f0: int, disparity: np.ndarray, cfg) -> np.ndarray:
+    """Depth seen at f0 for the occlusion test: from stereo, or the renderer's exact depth."""
+    if cfg.depth == "stereo":
+        return depth_from_disparity(disparity, seq.calibration.fx, seq.calibration.baseline_m)
+    if cfg.depth == "ground_truth":
+        return seq.load_depth(f0)
+    raise ValueError(f"unknown label.occlusion.depth {cfg.depth!r}; valid: stereo, ground_truth")
+
+
 def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     """Write labels, disparities, poses and reports of one sequence into out_dir; returns a summary."""
     footprint = footprint_for(seq, cfg.footprint)
@@ -101,7 +110,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
                 reports.append(report)
                 continue
         disparity = compute_disparity(matcher, seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
-        measured = depth_from_disparity(disparity, seq.calibration.fx, seq.calibration.baseline_m) if cfg.occlusion.enabled else None
+        measured = measured_depth(seq, f0, disparity, cfg.occlusion) if cfg.occlusion.enabled else None
         mask = path_mask(poses, f0, fn, footprint, K, size, measured, cfg.occlusion.margin_m, cfg.occlusion.margin_rel)
         report.label_pixels = int(np.count_nonzero(mask))
         if report.label_pixels == 0:

@@ -1,0 +1,154 @@
+"""The label stage on a rendered drive and on the real KITTI snippet: odometry against ground
+truth, labels against ground-truth labels, the report's quality gates, and bad input."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from offroad_path.label import label
+from offroad_path.labelling.compare import compare
+from offroad_path.odometry.trajectory import drift, run_odometry
+from offroad_path.sequence import SequenceError, open_sequence
+from offroad_path.world.record import record_sequence
+
+
+@pytest.fixture(scope="module")
+def drive(compose_config, tmp_path_factory) -> Path:
+    """A 40-frame laptop-preset drive (about 40 m), rendered once for the module."""
+    root = tmp_path_factory.mktemp("world") / "recordings"
+    record_sequence(compose_config("world.frames=40").world, seed=21, out_dir=root / "drive")
+    return root
+
+
+def label_config(compose_config, in_dir: Path, out: Path, *overrides: str):
+    return compose_config(
+        f"label.in_dir={in_dir}", f"label.out_dir={out / 'labels'}", f"label.metrics_path={out / 'metrics.json'}",
+        f"mlflow.tracking_uri=sqlite:///{out / 'mlflow.db'}", "label.workers=1", *overrides,
+    )  # fmt: skip
+
+
+def read_report(path: Path) -> list[dict]:
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_odometry_follows_the_rendered_drive(drive):
+    seq = open_sequence(drive / "drive")
+    run = run_odometry(seq)
+    assert not run.failed.any()
+    errors = drift(run.poses, seq.poses, 20.0)
+    assert errors["translation_drift_pct"] < 1.0
+    assert errors["rotation_drift_deg_per_m"] < 0.03
+
+
+def test_label_stage_writes_its_contract_and_tracks_it(compose_config, drive, tmp_path):
+    metrics = label(label_config(compose_config, drive, tmp_path))
+    out = tmp_path / "labels" / "drive"
+    report = read_report(out / "report.csv")
+    kept = [r for r in report if r["kept"] == "True"]
+    assert metrics["labels"] == len(kept) >= 8  # a label every 2 m over the first ~20 m
+    assert sorted(p.name for p in (out / "label").iterdir()) == [f"{int(r['f0']):06d}.png" for r in kept]
+    assert sorted(p.name for p in (out / "disparity").iterdir()) == sorted(p.name for p in (out / "label").iterdir())
+    for r in kept:
+        assert float(r["distance_m"]) > 20.0 and int(r["min_inliers"]) >= 40
+    mask = cv2.imread(str(out / "label" / f"{int(kept[0]['f0']):06d}.png"), cv2.IMREAD_UNCHANGED)
+    assert set(np.unique(mask)) == {0, 255} and mask.shape == (288, 512)
+    assert len(open(out / "poses_vo.txt").read().splitlines()) == 40
+    assert metrics["translation_drift_pct"] < 1.0
+    with sqlite3.connect(tmp_path / "mlflow.db") as db:
+        logged = dict(db.execute("select key, value from metrics").fetchall())
+        params = dict(db.execute("select key, value from params").fetchall())
+    assert logged["labels"] == metrics["labels"]
+    assert params["distance_m"] == "20.0" and params["poses.source"] == "vo"
+
+
+def test_vo_labels_agree_with_ground_truth_labels(compose_config, drive, tmp_path):
+    label(label_config(compose_config, drive, tmp_path / "vo"))
+    label(label_config(compose_config, drive, tmp_path / "gt_poses", "label.poses.source=file"))
+    # Fully exact: ground-truth poses, and the renderer's depth for the occlusion test.
+    label(label_config(compose_config, drive, tmp_path / "exact", "label.poses.source=file", "label.occlusion.depth=ground_truth"))
+    vo = tmp_path / "vo" / "labels"
+    by_poses = compare(vo, tmp_path / "gt_poses" / "labels")
+    exact = compare(vo, tmp_path / "exact" / "labels")
+    assert by_poses["common"] >= 8 and by_poses["only_a"] == by_poses["only_b"] == 0
+    assert by_poses["mean_iou"] > 0.95
+    assert exact["mean_iou"] > 0.93
+
+
+def test_a_blacked_out_frame_drops_its_segments_with_the_reason(compose_config, drive, tmp_path):
+    recordings = tmp_path / "recordings"
+    shutil.copytree(drive, recordings)
+    for side in ("image_l", "image_r"):
+        cv2.imwrite(str(recordings / "drive" / side / "000012.png"), np.zeros((288, 512, 3), np.uint8))
+    metrics = label(label_config(compose_config, recordings, tmp_path))
+    report = read_report(tmp_path / "labels" / "drive" / "report.csv")
+    dropped = [r for r in report if r["kept"] == "False"]
+    assert dropped and metrics["segments_dropped"] == len(dropped)
+    for r in dropped:
+        assert int(r["f0"]) <= 12 <= int(r["fn"])
+        assert r["reason"].startswith("odometry failed from frame 11 to 12") or r["reason"].startswith(
+            "odometry failed from frame 12 to 13"
+        )
+    for r in report:
+        written = (tmp_path / "labels" / "drive" / "label" / f"{int(r['f0']):06d}.png").exists()
+        assert written == (r["kept"] == "True")
+    assert any(int(r["f0"]) > 12 and r["kept"] == "True" for r in report)  # odometry recovers after it
+
+
+BAD = {
+    "missing right image": (lambda root: (root / "image_r" / "000005.png").unlink(), "image_r", ()),
+    "calib without baseline": (
+        lambda root: (root / "calib.txt").write_text("\n".join([(root / "calib.txt").read_text().splitlines()[0]] * 2) + "\n"),
+        "calib.txt",
+        (),
+    ),
+    "poses of wrong length": (
+        lambda root: (root / "poses.txt").write_text("".join((root / "poses.txt").read_text().splitlines(True)[:-3])),
+        "poses.txt",
+        ("label.poses.source=file",),
+    ),
+}
+
+
+@pytest.mark.parametrize("case", BAD)
+def test_bad_input_names_the_file_and_leaves_no_labels(compose_config, drive, tmp_path, case):
+    damage, file, overrides = BAD[case]
+    recordings = tmp_path / "recordings"
+    shutil.copytree(drive, recordings)
+    damage(recordings / "drive")
+    previous = tmp_path / "labels"
+    previous.mkdir()
+    (previous / "earlier.txt").write_text("a complete earlier run")
+    with pytest.raises(SequenceError, match=str(recordings / "drive" / file)):
+        label(label_config(compose_config, recordings, tmp_path, *overrides))
+    assert [p.name for p in previous.iterdir()] == ["earlier.txt"]
+    assert not list(tmp_path.glob(".labels*"))
+
+
+def test_cli_exits_non_zero_with_one_line(drive, tmp_path):
+    recordings = tmp_path / "recordings"
+    shutil.copytree(drive, recordings)
+    (recordings / "drive" / "image_r" / "000005.png").unlink()
+    run = subprocess.run(
+        [sys.executable, "-m", "offroad_path.label", f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'labels'}", "mlflow.enabled=false"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1].startswith(f"error: {recordings / 'drive' / 'image_r'}: lacks 1 right image")
+    assert not (tmp_path / "labels").exists()
+
+
+def test_odometry_on_the_real_kitti_snippet(kitti_snippet):
+    seq = open_sequence(kitti_snippet)
+    run = run_odometry(seq)
+    assert not run.failed.any()
+    assert drift(run.poses, seq.poses, 20.0)["translation_drift_pct"] < 1.5
