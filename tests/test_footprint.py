@@ -74,7 +74,7 @@ def test_occlusion_removes_footprint_behind_a_crest():
     # A wall at 6 m across the whole view: footprint beyond 6 * 1.1 + 1 = 7.6 m is hidden.
     measured[:, :] = 6.0
     occluded = path_mask(poses, 0, 20, CAR, K, SIZE, measured)
-    v_at = {z: int(round(100 / z + 40)) for z in (5, 10)}
+    v_at = {z: round(100 / z + 40) for z in (5, 10)}
     assert full[v_at[10], 50] == 255 and occluded[v_at[10], 50] == 0
     assert occluded[v_at[5], 50] == 255
     assert np.array_equal(path_mask(poses, 0, 20, CAR, K, SIZE), full)

@@ -62,7 +62,7 @@ def test_label_stage_writes_its_contract_and_tracks_it(compose_config, drive, tm
         assert float(r["distance_m"]) > 20.0 and int(r["min_inliers"]) >= 40
     mask = cv2.imread(str(out / "label" / f"{int(kept[0]['f0']):06d}.png"), cv2.IMREAD_UNCHANGED)
     assert set(np.unique(mask)) == {0, 255} and mask.shape == (288, 512)
-    assert len(open(out / "poses_vo.txt").read().splitlines()) == 40
+    assert len((out / "poses_vo.txt").read_text().splitlines()) == 40
     assert metrics["translation_drift_pct"] < 1.0
     with sqlite3.connect(tmp_path / "mlflow.db") as db:
         logged = dict(db.execute("select key, value from metrics").fetchall())
@@ -138,10 +138,8 @@ def test_cli_exits_non_zero_with_one_line(drive, tmp_path):
     recordings = tmp_path / "recordings"
     shutil.copytree(drive, recordings)
     (recordings / "drive" / "image_r" / "000005.png").unlink()
-    run = subprocess.run(
-        [sys.executable, "-m", "offroad_path.label", f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'labels'}", "mlflow.enabled=false"],
-        capture_output=True, text=True,
-    )  # fmt: skip
+    cli = [sys.executable, "-m", "offroad_path.label", f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'labels'}"]
+    run = subprocess.run([*cli, "mlflow.enabled=false"], capture_output=True, text=True)
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1].startswith(f"error: {recordings / 'drive' / 'image_r'}: lacks 1 right image")
     assert not (tmp_path / "labels").exists()
