@@ -1,7 +1,9 @@
-"""`dvc repro` on a tiny preset in a temporary copy of the repository: runs, then runs nothing."""
+"""`dvc repro` on a tiny preset in a temporary copy of the repository: runs every stage, then
+runs nothing, then reruns what a config edit touches."""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -41,8 +43,10 @@ def repo_copy(tmp_path) -> Path:
 
 def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     out = dvc(repo_copy, "repro")
-    assert "Running stage 'synthesize'" in out
+    assert "Running stage 'synthesize'" in out and "Running stage 'label'" in out
     assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2
+    assert sorted(p.name for p in (repo_copy / "data" / "labels").iterdir()) == ["seq_000", "seq_001", "summary.json"]
+    assert json.loads((repo_copy / "metrics" / "label.json").read_text())["sequences"] == 2
     assert "Data and pipelines are up to date" in dvc(repo_copy, "repro")
     world = repo_copy / "conf" / "world" / "default.yaml"
     world.write_text(world.read_text().replace("hill_height_m: 4.0", "hill_height_m: 2.0"))

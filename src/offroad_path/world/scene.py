@@ -95,7 +95,7 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
     hgrid = _grid(lo, hi, HEIGHT_STEP_M)
     mgrid = _grid(lo, hi, MATERIAL_STEP_M)
 
-    heights = fourier_hills(rng, hgrid, cfg.hill_height_m, (40.0, 150.0), 6)
+    heights = fourier_hills(rng, hgrid, cfg.hill_height_m, (30.0, 120.0), 6)
     heights += cfg.bump_height_m * value_noise(rng, hgrid.shape, 1.5 / HEIGHT_STEP_M)
     heights += 0.3 * cfg.bump_height_m * value_noise(rng, hgrid.shape, 0.6 / HEIGHT_STEP_M)
     # A track bed is smoother than the land around it.
