@@ -18,6 +18,6 @@ def test_world_and_labels_notebook_runs(monkeypatch):
     namespace: dict = {}
     for cell in notebook["cells"]:
         if cell["cell_type"] == "code":
-            exec(compile("".join(cell["source"]), "notebook", "exec"), namespace)  # noqa: S102
+            exec(compile("".join(cell["source"]), "notebook", "exec"), namespace)
     assert namespace["kept"] and namespace["mask"].any()
     assert namespace["panel"].shape == (288, 3 * 512, 3)
