@@ -30,3 +30,24 @@ def kitti_snippet() -> Path:
     if not (KITTI_SNIPPET / "calib.txt").is_file():
         pytest.skip(f"the real KITTI snippet is not at {KITTI_SNIPPET} (it lives in shared/, beside the repo)")
     return KITTI_SNIPPET
+
+
+@pytest.fixture(scope="session")
+def drive(compose_config, tmp_path_factory) -> Path:
+    """A folder with one 40-frame laptop-preset drive (about 40 m), rendered once per session."""
+    from offroad_path.world.record import record_sequence
+
+    root = tmp_path_factory.mktemp("world") / "recordings"
+    record_sequence(compose_config("world.frames=40").world, seed=21, out_dir=root / "drive")
+    return root
+
+
+@pytest.fixture(scope="session")
+def labelled_drive(compose_config, drive, tmp_path_factory) -> Path:
+    """The label stage's output for `drive` (VO poses), made once per session."""
+    from offroad_path.label import label
+
+    out = tmp_path_factory.mktemp("labelled")
+    label(compose_config(f"label.in_dir={drive}", f"label.out_dir={out / 'labels'}", f"label.metrics_path={out / 'm.json'}",
+                         "label.workers=1", "mlflow.enabled=false"))  # fmt: skip
+    return out / "labels"

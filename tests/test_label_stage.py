@@ -18,15 +18,6 @@ from offroad_path.label import label
 from offroad_path.labelling.compare import compare
 from offroad_path.odometry.trajectory import drift, run_odometry
 from offroad_path.sequence import SequenceError, open_sequence
-from offroad_path.world.record import record_sequence
-
-
-@pytest.fixture(scope="module")
-def drive(compose_config, tmp_path_factory) -> Path:
-    """A 40-frame laptop-preset drive (about 40 m), rendered once for the module."""
-    root = tmp_path_factory.mktemp("world") / "recordings"
-    record_sequence(compose_config("world.frames=40").world, seed=21, out_dir=root / "drive")
-    return root
 
 
 def label_config(compose_config, in_dir: Path, out: Path, *overrides: str):

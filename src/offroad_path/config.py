@@ -125,6 +125,19 @@ class LabelConfig:
 
 
 @dataclass
+class SplitConfig:
+    labels_dir: str = "data/labels"
+    out_dir: str = "data/split"
+    strategy: str = "grouped"  # grouped: by blocks of driving, no leakage; random: the paper's per-image split
+    test_fraction: float = 0.1
+    val_fraction: float = 0.1
+    block_m: float = 20.0
+    guard_m: float = 10.0
+    mirror: bool = True
+    seed: int = 0
+
+
+@dataclass
 class MlflowConfig:
     enabled: bool = True
     experiment: str = "offroad-path"
@@ -137,6 +150,7 @@ class Config:
     world: WorldConfig = field(default_factory=WorldConfig)
     synthesize: SynthesizeConfig = field(default_factory=SynthesizeConfig)
     label: LabelConfig = field(default_factory=LabelConfig)
+    split: SplitConfig = field(default_factory=SplitConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = "laptop"
 

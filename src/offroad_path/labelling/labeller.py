@@ -123,7 +123,8 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
 
     _write_csv(out_dir / "report.csv", [asdict(r) for r in reports], [f.name for f in fields(SegmentReport)])
     summary = {
-        "name": seq.name,
+        "name": out_dir.name,
+        "root": str(seq.root),
         "frames": len(seq),
         "poses_source": cfg.poses.source,
         "segments": len(reports),

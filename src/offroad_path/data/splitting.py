@@ -1,0 +1,74 @@
+"""Train / validation / test splits of labelled frames that do not leak.
+
+Labels a few metres apart show nearly the same scene, so a per-image random split (the paper's)
+puts near-duplicates on both sides. Here frames are grouped into blocks of `block_m` metres of
+driving within each sequence; whole blocks go to test and validation, and training frames within
+`guard_m` of a held-out frame are left out, so no held-out frame has a neighbour in training.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+STRATEGIES = ("grouped", "random")
+
+
+@dataclass(frozen=True)
+class Frame:
+    sequence: str
+    f0: int
+    travelled_m: float  # position along the sequence's driven path at f0
+
+
+def split_frames(
+    frames: list[Frame],
+    strategy: str = "grouped",
+    test_fraction: float = 0.1,
+    val_fraction: float = 0.1,
+    block_m: float = 20.0,
+    guard_m: float = 10.0,
+    seed: int = 0,
+) -> tuple[dict[str, list[Frame]], int]:
+    """({'train': [...], 'val': [...], 'test': [...]}, number of training frames left out as guard)."""
+    if strategy not in STRATEGIES:
+        raise ValueError(f"unknown split strategy {strategy!r}; valid: {', '.join(STRATEGIES)}")
+    rng = np.random.default_rng(seed)
+    if strategy == "random":
+        log.warning("split strategy 'random' (the paper's per-image split) puts near-duplicate neighbours in train and test")
+        order = rng.permutation(len(frames))
+        n_test, n_val = round(test_fraction * len(frames)), round(val_fraction * len(frames))
+        picked = [frames[i] for i in order]
+        return {"test": picked[:n_test], "val": picked[n_test : n_test + n_val], "train": picked[n_test + n_val :]}, 0
+
+    groups: dict[tuple[str, int], list[Frame]] = {}
+    for frame in frames:
+        groups.setdefault((frame.sequence, int(frame.travelled_m // block_m)), []).append(frame)
+    keys = sorted(groups)
+    order = [keys[i] for i in rng.permutation(len(keys))]
+    split: dict[str, list[Frame]] = {"test": [], "val": [], "train": []}
+    targets = {"test": test_fraction * len(frames), "val": val_fraction * len(frames)}
+    for key in order:
+        for name in ("test", "val"):
+            if len(split[name]) < targets[name]:
+                split[name].extend(groups[key])
+                break
+        else:
+            split["train"].extend(groups[key])
+    held_out: dict[str, np.ndarray] = {}
+    for frame in split["test"] + split["val"]:
+        held_out.setdefault(frame.sequence, []).append(frame.travelled_m)
+    train = [f for f in split["train"] if not _near(f, held_out, guard_m)]
+    guarded = len(split["train"]) - len(train)
+    split["train"] = train
+    for name in split:
+        split[name].sort(key=lambda f: (f.sequence, f.f0))
+    return split, guarded
+
+
+def _near(frame: Frame, held_out: dict[str, list[float]], guard_m: float) -> bool:
+    positions = held_out.get(frame.sequence)
+    return positions is not None and bool(np.min(np.abs(np.asarray(positions) - frame.travelled_m)) < guard_m)

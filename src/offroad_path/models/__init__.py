@@ -1,0 +1,19 @@
+"""The path-prediction networks of Holder & Breckon 2018, selectable by name."""
+
+from __future__ import annotations
+
+from offroad_path.models.base import SegmentationNet
+from offroad_path.models.fcn import FCN8s
+from offroad_path.models.segnet import SegNet
+from offroad_path.models.unet import UNet
+
+MODELS: dict[str, type[SegmentationNet]] = {"segnet": SegNet, "fcn": FCN8s, "unet": UNet}
+
+
+def build_model(name: str, num_classes: int = 2, width: float = 1.0) -> SegmentationNet:
+    if name not in MODELS:
+        raise ValueError(f"unknown model {name!r}; valid: {', '.join(sorted(MODELS))}")
+    return MODELS[name](num_classes=num_classes, width=width)
+
+
+__all__ = ["MODELS", "FCN8s", "SegNet", "SegmentationNet", "UNet", "build_model"]

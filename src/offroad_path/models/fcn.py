@@ -1,0 +1,74 @@
+"""FCN-8s: Long, Shelhamer and Darrell, "Fully Convolutional Networks for Semantic
+Segmentation", CVPR 2015.
+
+VGG16 (no batch norm) with fc6/fc7 recast as 7x7 and 1x1 convolutions with dropout; class scores
+from fc7 are upsampled 2x and fused with scores from pool4, again with pool3, then upsampled 8x.
+Upsampling layers start as bilinear interpolation. About 134 M parameters at width 1.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from offroad_path.models.base import SegmentationNet, conv_bn_relu, scaled
+from offroad_path.models.segnet import VGG16
+
+
+def bilinear_kernel(channels: int, size: int) -> torch.Tensor:
+    """ConvTranspose2d weights (channels, channels, size, size) that upsample bilinearly."""
+    factor = (size + 1) // 2
+    centre = factor - 1 if size % 2 == 1 else factor - 0.5
+    og = torch.arange(size, dtype=torch.float32)
+    filt = (1 - (og - centre).abs() / factor)[:, None] * (1 - (og - centre).abs() / factor)[None, :]
+    weight = torch.zeros(channels, channels, size, size)
+    weight[range(channels), range(channels)] = filt
+    return weight
+
+
+class FCN8s(SegmentationNet):
+    def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3, dropout: float = 0.5):
+        super().__init__(num_classes)
+        stages = [[scaled(c, width) for c in stage] for stage in VGG16]
+        self.features = nn.ModuleList()
+        cin = in_channels
+        for stage in stages:
+            layers = []
+            for cout in stage:
+                layers += conv_bn_relu(cin, cout, batch_norm=False)
+                cin = cout
+            layers.append(nn.MaxPool2d(2, 2))
+            self.features.append(nn.Sequential(*layers))
+        fc = scaled(4096, width)
+        self.fc6 = nn.Sequential(nn.Conv2d(cin, fc, 7, padding=3), nn.ReLU(inplace=True), nn.Dropout2d(dropout))
+        self.fc7 = nn.Sequential(nn.Conv2d(fc, fc, 1), nn.ReLU(inplace=True), nn.Dropout2d(dropout))
+        self._channels = (stages[2][-1], stages[3][-1], fc)
+        self._build_head(num_classes)
+
+    def _build_head(self, num_classes: int) -> None:
+        pool3, pool4, fc = self._channels
+        self.score_fr = nn.Conv2d(fc, num_classes, 1)
+        self.score_pool4 = nn.Conv2d(pool4, num_classes, 1)
+        self.score_pool3 = nn.Conv2d(pool3, num_classes, 1)
+        self.upscore2 = nn.ConvTranspose2d(num_classes, num_classes, 4, stride=2, padding=1, bias=False)
+        self.upscore_pool4 = nn.ConvTranspose2d(num_classes, num_classes, 4, stride=2, padding=1, bias=False)
+        self.upscore8 = nn.ConvTranspose2d(num_classes, num_classes, 16, stride=8, padding=4, bias=False)
+        for up in (self.upscore2, self.upscore_pool4, self.upscore8):
+            up.weight.data.copy_(bilinear_kernel(num_classes, up.kernel_size[0]))
+        self.num_classes = num_classes
+
+    def forward_padded(self, x: torch.Tensor) -> torch.Tensor:
+        pools = []
+        for stage in self.features:
+            x = stage(x)
+            pools.append(x)
+        score = self.upscore2(self.score_fr(self.fc7(self.fc6(x))))  # 1/16
+        score = self.upscore_pool4(score + self.score_pool4(pools[3]))  # 1/8
+        return self.upscore8(score + self.score_pool3(pools[2]))  # full size
+
+    def head_parameters(self) -> list[str]:
+        names = ("score_fr", "score_pool4", "score_pool3", "upscore2", "upscore_pool4", "upscore8")
+        return [n for n, _ in self.named_parameters() if n.split(".")[0] in names]
+
+    def replace_head(self, num_classes: int) -> None:
+        self._build_head(num_classes)

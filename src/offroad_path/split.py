@@ -1,0 +1,82 @@
+"""Stage `split`: train / validation / test manifests of the labelled frames (see DESIGN.md).
+
+    python -m offroad_path.split [split.strategy=random] [split.mirror=false]
+
+Frames are split by blocks of driving (see offroad_path.data.splitting) with a fixed seed;
+each frame's mirrored copy is added beside it, in the same split.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig
+
+from offroad_path.config import register_configs
+from offroad_path.data.manifest import Sample, write_manifest
+from offroad_path.data.splitting import Frame, split_frames
+from offroad_path.sequence.poses import read_poses
+from offroad_path.sequence.reader import open_sequence
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.cli import clear_errors
+
+register_configs()
+log = logging.getLogger("offroad_path.split")
+
+
+def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int], Sample]]:
+    """Every labelled f0 under labels_dir, with its position along the path and its sample row."""
+    summary_path = labels_dir / "summary.json"
+    if not summary_path.is_file():
+        raise FileNotFoundError(f"{summary_path}: missing (run the label stage first)")
+    frames, samples = [], {}
+    for entry in json.loads(summary_path.read_text())["sequences"]:
+        name, seq = entry["name"], open_sequence(entry["root"])
+        poses_path = labels_dir / name / "poses_vo.txt"
+        poses = read_poses(poses_path, len(seq)) if poses_path.is_file() else seq.poses
+        travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))])
+        for label in sorted((labels_dir / name / "label").glob("*.png")):
+            f0 = int(label.stem)
+            frames.append(Frame(name, f0, float(travelled[f0])))
+            semantic = str(seq.semantic[f0]) if seq.semantic is not None else ""
+            samples[(name, f0)] = Sample(name, f0, False, str(seq.left[f0]), str(label), str(labels_dir / name / "disparity" / label.name),
+                                         semantic, seq.calibration.fx, seq.calibration.baseline_m)  # fmt: skip
+    return frames, samples
+
+
+def split(cfg: DictConfig) -> dict:
+    c = cfg.split
+    frames, samples = labelled_frames(Path(c.labels_dir))
+    if not frames:
+        raise ValueError(f"{c.labels_dir}: holds no labels to split")
+    parts, guarded = split_frames(frames, c.strategy, c.test_fraction, c.val_fraction, c.block_m, c.guard_m, c.seed)
+    counts = {}
+    with atomic_directory(c.out_dir) as tmp:
+        for name, part in parts.items():
+            rows = []
+            for frame in part:
+                sample = samples[(frame.sequence, frame.f0)]
+                rows.append(sample)
+                if c.mirror:
+                    rows.append(Sample(**{**sample.__dict__, "mirrored": True}))
+            write_manifest(tmp / f"{name}.csv", rows)
+            counts[name] = len(rows)
+        summary = {"frames": len(frames), "guarded_out": guarded, "samples": counts, "strategy": c.strategy, "mirror": c.mirror}
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    log.info("split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones",
+             len(frames), counts, " (with mirrored copies)" if c.mirror else "", guarded)  # fmt: skip
+    return summary
+
+
+@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    with clear_errors():
+        split(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,71 @@
+"""Splits: nothing held out has a neighbour in training; mirrored copies stay beside their frame."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import numpy as np
+import pytest
+
+from offroad_path.data.manifest import read_manifest
+from offroad_path.data.splitting import Frame, split_frames
+from offroad_path.split import split
+
+
+def frames_along(sequences: int, count: int, spacing_m: float) -> list[Frame]:
+    return [Frame(f"s{s}", i, i * spacing_m) for s in range(sequences) for i in range(count)]
+
+
+def test_grouped_split_leaves_no_neighbour_in_training():
+    frames = frames_along(3, 100, 2.0)
+    parts, guarded = split_frames(frames, test_fraction=0.1, val_fraction=0.1, block_m=20.0, guard_m=10.0, seed=3)
+    assert 30 <= len(parts["test"]) <= 40 and 30 <= len(parts["val"]) <= 40
+    assert guarded > 0 and len(parts["train"]) + len(parts["test"]) + len(parts["val"]) + guarded == 300
+    for held in parts["test"] + parts["val"]:
+        nearest = min(abs(t.travelled_m - held.travelled_m) for t in parts["train"] if t.sequence == held.sequence)
+        assert nearest >= 10.0
+    # Blocks stay whole: a 20 m block is all on one side.
+    side = {(f.sequence, int(f.travelled_m // 20)): name for name, part in parts.items() for f in part}
+    for name, part in parts.items():
+        for f in part:
+            assert side[(f.sequence, int(f.travelled_m // 20))] == name
+    again, _ = split_frames(frames, test_fraction=0.1, val_fraction=0.1, block_m=20.0, guard_m=10.0, seed=3)
+    assert again == parts
+
+
+def test_random_split_is_the_papers_and_warns(caplog):
+    frames = frames_along(1, 100, 2.0)
+    with caplog.at_level(logging.WARNING):
+        parts, guarded = split_frames(frames, strategy="random", seed=0)
+    assert "near-duplicate" in caplog.text and guarded == 0
+    assert (len(parts["test"]), len(parts["val"]), len(parts["train"])) == (10, 10, 80)
+    train = {f.travelled_m for f in parts["train"]}
+    assert any(abs(f.travelled_m - t) <= 2.0 for f in parts["test"] for t in train)  # neighbours leak
+
+
+def test_unknown_strategy_lists_valid_ones():
+    with pytest.raises(ValueError, match="valid: grouped, random"):
+        split_frames(frames_along(1, 10, 2.0), strategy="kfold")
+
+
+def test_split_stage_writes_manifests_with_mirrored_pairs(compose_config, labelled_drive, tmp_path):
+    # The drive has ~10 labels over 20 m: small blocks, so that all three parts get some.
+    overrides = (f"split.labels_dir={labelled_drive}", f"split.out_dir={tmp_path / 'split'}", "split.block_m=4", "split.guard_m=3")
+    summary = split(compose_config(*overrides))
+    parts = {name: read_manifest(tmp_path / "split" / f"{name}.csv") for name in ("train", "val", "test")}
+    labelled = len(list(labelled_drive.glob("*/label/*.png")))
+    assert summary["frames"] == labelled
+    assert sum(len(p) for p in parts.values()) == 2 * (labelled - summary["guarded_out"])
+    for part in parts.values():
+        by_frame = {}
+        for sample in part:
+            by_frame.setdefault(sample.f0, []).append(sample.mirrored)
+        assert all(sorted(m) == [False, True] for m in by_frame.values())  # each frame with its mirror
+    f0 = {name: {s.f0 for s in part} for name, part in parts.items()}
+    assert not (f0["train"] & f0["test"]) and not (f0["train"] & f0["val"]) and parts["test"]
+    sample = parts["train"][0]
+    assert sample.image.endswith(f"image_l/{sample.f0:06d}.png") and sample.semantic.endswith(f"semantic/{sample.f0:06d}.png")
+    assert sample.baseline_m == pytest.approx(0.21) and sample.fx == pytest.approx(305.089, abs=1e-3)
+    assert json.loads((tmp_path / "split" / "summary.json").read_text()) == summary
+    np.testing.assert_array_less(0, [len(p) for p in parts.values()])
