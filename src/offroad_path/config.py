@@ -138,6 +138,63 @@ class SplitConfig:
 
 
 @dataclass
+class DataConfig:
+    split_dir: str = "data/split"
+    width: int = 512  # network input size; labels and predictions stay at the recorded size
+    height: int = 288
+    batch_size: int = 6
+    num_workers: int = 0
+    pin_memory: bool = False
+    augment: bool = True
+    jitter: float = 0.2  # brightness, contrast and saturation jitter
+    min_scale: float = 0.8  # random resized crop keeps at least this fraction of the image
+
+
+@dataclass
+class ModelConfig:
+    name: str = MISSING  # segnet | fcn | unet
+    width: float = 1.0  # channel multiplier: 1 is the original network
+    lr: float = 1e-3
+    lr_step_epochs: int = 0  # step decay every N epochs (0: fixed learning rate)
+    lr_gamma: float = 0.1
+    momentum: float = 0.9
+    weight_decay: float = 5e-4
+
+
+@dataclass
+class PretrainingConfig:
+    name: str = "none"  # none | segmentation | imagenet
+    checkpoint: str | None = None  # segmentation: the pretrain stage's checkpoint
+    weights_path: str | None = None  # imagenet: VGG16(-BN) weights in torchvision's state-dict layout
+
+
+@dataclass
+class TrainerConfig:
+    max_epochs: int = 100
+    accelerator: str = "auto"
+    devices: str = "auto"
+    precision: str = "32-true"
+    channels_last: bool = False
+    deterministic: bool = False
+    log_every_n_steps: int = 10
+    patience: int = 5  # early stopping: epochs without a better validation IoU
+    fast_dev_run: bool = False
+
+
+@dataclass
+class PretrainConfig:
+    out_dir: str = "data/pretrain/${model.name}"
+
+
+@dataclass
+class TrainConfig:
+    out_dir: str = "data/runs/${model.name}-${pretraining.name}"
+    seed: int = 0
+    resume: bool = True  # continue from out_dir/checkpoints/last.ckpt when it exists
+    sample_images: int = 4  # validation predictions logged to MLflow each epoch
+
+
+@dataclass
 class MlflowConfig:
     enabled: bool = True
     experiment: str = "offroad-path"
@@ -151,6 +208,12 @@ class Config:
     synthesize: SynthesizeConfig = field(default_factory=SynthesizeConfig)
     label: LabelConfig = field(default_factory=LabelConfig)
     split: SplitConfig = field(default_factory=SplitConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    pretraining: PretrainingConfig = field(default_factory=PretrainingConfig)
+    trainer: TrainerConfig = field(default_factory=TrainerConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    pretrain: PretrainConfig = field(default_factory=PretrainConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = "laptop"
 

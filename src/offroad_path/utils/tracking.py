@@ -39,3 +39,25 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
         mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
         mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
         yield run
+
+
+def multirun_parent(cfg: DictConfig) -> str | None:
+    """In a Hydra multirun, the id of the sweep's parent run (made by the sweep's first job), so
+    that every job shows as its child in the MLflow UI; None outside a multirun."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    if not HydraConfig.initialized() or HydraConfig.get().mode != RunMode.MULTIRUN:
+        return None
+    from mlflow.tracking import MlflowClient
+
+    sweep = str(HydraConfig.get().sweep.dir)
+    client = MlflowClient(tracking_uri(cfg.mlflow))
+    experiment = client.get_experiment_by_name(cfg.mlflow.experiment)
+    experiment_id = experiment.experiment_id if experiment else client.create_experiment(cfg.mlflow.experiment)
+    found = client.search_runs([experiment_id], filter_string=f"tags.sweep_dir = '{sweep}'", max_results=1)
+    if found:
+        return found[0].info.run_id
+    parent = client.create_run(experiment_id, run_name=f"sweep {Path(sweep).name}", tags={"sweep_dir": sweep, "stage": "sweep"})
+    client.set_terminated(parent.info.run_id)
+    return parent.info.run_id

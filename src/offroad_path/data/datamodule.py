@@ -1,0 +1,44 @@
+"""The LightningDataModule over the split stage's manifests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import lightning as L
+from torch.utils.data import DataLoader
+
+from offroad_path.data.dataset import ManifestDataset, transforms
+from offroad_path.data.manifest import Sample, read_manifest
+
+
+class OffroadDataModule(L.LightningDataModule):
+    """train / val / test loaders for target 'path' (2 classes) or 'semantic' (8 classes)."""
+
+    def __init__(self, split_dir: str, target: str = "path", width: int = 512, height: int = 288, batch_size: int = 6,
+                 num_workers: int = 0, pin_memory: bool = False, augment: bool = True, jitter: float = 0.2,
+                 min_scale: float = 0.8):  # fmt: skip
+        super().__init__()
+        self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
+        self.split_dir = Path(split_dir)
+        self.samples: dict[str, list[Sample]] = {}
+
+    def setup(self, stage: str | None = None) -> None:
+        for name in ("train", "val", "test"):
+            if name not in self.samples:
+                self.samples[name] = read_manifest(self.split_dir / f"{name}.csv")
+
+    def _loader(self, name: str, train: bool) -> DataLoader:
+        hp = self.hparams
+        transform = transforms(hp.width, hp.height, augment=train and hp.augment, jitter=hp.jitter, min_scale=hp.min_scale)
+        dataset = ManifestDataset(self.samples[name], hp.target, transform)
+        return DataLoader(dataset, batch_size=hp.batch_size, shuffle=train, drop_last=train and len(dataset) > hp.batch_size,
+                          num_workers=hp.num_workers, pin_memory=hp.pin_memory, persistent_workers=hp.num_workers > 0)  # fmt: skip
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", train=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", train=False)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", train=False)

@@ -1,0 +1,79 @@
+"""Samples from a manifest as tensors: image, path label or semantic map, and stereo depth."""
+
+from __future__ import annotations
+
+import albumentations as A
+import cv2
+import numpy as np
+import torch
+from albumentations.pytorch import ToTensorV2
+from torch.utils.data import Dataset
+
+from offroad_path.data.manifest import Sample
+from offroad_path.labelling.disparity import decode_disparity, depth_from_disparity
+
+TARGETS = ("path", "semantic")
+
+
+def read(path: str, flags: int) -> np.ndarray:
+    image = cv2.imread(path, flags)
+    if image is None:
+        raise FileNotFoundError(f"{path}: missing or not an image")
+    return image
+
+
+def load_sample(sample: Sample, target: str) -> tuple[np.ndarray, np.ndarray]:
+    """(RGB image (H, W, 3) uint8, target (H, W) int64), mirrored when the sample says so.
+
+    target 'path': 1 where the label says path; 'semantic': the world's class ids 0..7.
+    """
+    image = cv2.cvtColor(read(sample.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    if target == "path":
+        mask = (read(sample.label, cv2.IMREAD_GRAYSCALE) > 0).astype(np.int64)
+    elif target == "semantic":
+        if not sample.semantic:
+            raise ValueError(f"{sample.image}: no semantic map to pretrain on (real recordings have none)")
+        mask = read(sample.semantic, cv2.IMREAD_UNCHANGED).astype(np.int64)
+    else:
+        raise ValueError(f"unknown target {target!r}; valid: {', '.join(TARGETS)}")
+    if sample.mirrored:
+        image, mask = image[:, ::-1], mask[:, ::-1]
+    return np.ascontiguousarray(image), np.ascontiguousarray(mask)
+
+
+def load_depth(sample: Sample) -> np.ndarray:
+    """Stereo depth of the sample's frame (H, W) float32 metres, 0 unknown, mirrored with it."""
+    depth = depth_from_disparity(decode_disparity(read(sample.disparity, cv2.IMREAD_UNCHANGED)), sample.fx, sample.baseline_m)
+    return np.ascontiguousarray(depth[:, ::-1]) if sample.mirrored else depth
+
+
+def transforms(width: int, height: int, augment: bool, jitter: float = 0.2, min_scale: float = 0.8) -> A.Compose:
+    """Resize to the network's input (nearest for the target), with photometric jitter and a small
+    random scale and crop when augmenting; flips are already in the data as mirrored copies."""
+    ops: list = []
+    if augment:
+        aspect = width / height
+        ops += [
+            A.RandomResizedCrop(size=(height, width), scale=(min_scale, 1.0), ratio=(aspect * 0.9, aspect * 1.1)),
+            A.ColorJitter(brightness=jitter, contrast=jitter, saturation=jitter, hue=0.02),
+        ]
+    else:
+        ops.append(A.Resize(height, width))
+    return A.Compose([*ops, A.Normalize(), ToTensorV2()])
+
+
+class ManifestDataset(Dataset):
+    def __init__(self, samples: list[Sample], target: str, transform: A.Compose):
+        if target not in TARGETS:
+            raise ValueError(f"unknown target {target!r}; valid: {', '.join(TARGETS)}")
+        self.samples = samples
+        self.target = target
+        self.transform = transform
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def __getitem__(self, i: int) -> dict:
+        image, mask = load_sample(self.samples[i], self.target)
+        out = self.transform(image=image, mask=mask)
+        return {"image": out["image"], "target": out["mask"].long(), "index": torch.tensor(i)}

@@ -1,0 +1,39 @@
+"""Stage `pretrain`: train an architecture on the world's 8-class semantic segmentation, for
+`train pretraining=segmentation` to start from (Holder's thesis, chapter 5).
+
+    python -m offroad_path.pretrain model=unet
+
+Writes pretrain.out_dir (data/pretrain/<model>): checkpoints/best.ckpt and metrics.json.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+from offroad_path.config import register_configs
+from offroad_path.training.run import fit
+from offroad_path.utils.cli import clear_errors
+from offroad_path.world.classes import CLASS_NAMES
+
+register_configs()
+log = logging.getLogger("offroad_path.pretrain")
+
+
+def pretrain(cfg: DictConfig) -> dict:
+    metrics, _, _ = fit(cfg, "pretrain", "semantic", len(CLASS_NAMES), Path(cfg.pretrain.out_dir), "none")
+    log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])
+    return metrics
+
+
+@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    with clear_errors():
+        pretrain(cfg)
+
+
+if __name__ == "__main__":
+    main()

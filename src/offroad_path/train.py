@@ -1,0 +1,43 @@
+"""Stage `train`: fit one architecture with one pretraining choice on the path labels, test it,
+and write the test-set confidence maps for post-processing (see DESIGN.md).
+
+    python -m offroad_path.train model=segnet pretraining=segmentation
+    python -m offroad_path.train -m model=segnet,fcn,unet pretraining=none,segmentation
+
+Writes train.out_dir (data/runs/<model>-<pretraining>): checkpoints/ (best.ckpt, last.ckpt),
+metrics.json, predictions/ (float16 .npy per test sample and manifest.csv); logs to MLflow.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+from offroad_path.config import register_configs
+from offroad_path.training.run import fit, write_confidence_maps
+from offroad_path.utils.cli import clear_errors
+
+register_configs()
+log = logging.getLogger("offroad_path.train")
+
+
+def train(cfg: DictConfig) -> dict:
+    out_dir = Path(cfg.train.out_dir)
+    metrics, task, data = fit(cfg, "train", "path", 2, out_dir, cfg.pretraining.name)
+    written = write_confidence_maps(task, data, out_dir / "predictions")
+    log.info("%s-%s: best validation IoU %s, test IoU %.4f; %d confidence maps in %s", cfg.model.name, cfg.pretraining.name,
+             metrics["best_val_iou"], metrics["test/iou"], written, out_dir / "predictions")  # fmt: skip
+    return metrics
+
+
+@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    with clear_errors():
+        train(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Training: the Lightning task, pretrained initialisation, and the run shared by `pretrain` and `train`."""

@@ -1,0 +1,87 @@
+"""The Lightning task: per-pixel softmax cross-entropy over the path (2 classes) or the world's
+8 semantic classes, SGD as Holder & Breckon trained, torchmetrics per split."""
+
+from __future__ import annotations
+
+import lightning as L
+import torch
+import torch.nn.functional as F
+from torchmetrics import MetricCollection
+from torchmetrics.classification import (
+    BinaryAccuracy,
+    BinaryJaccardIndex,
+    BinaryPrecision,
+    BinaryRecall,
+    MulticlassAccuracy,
+    MulticlassJaccardIndex,
+)
+
+from offroad_path.models import build_model
+
+
+class SegmentationTask(L.LightningModule):
+    def __init__(
+        self,
+        model: str,
+        num_classes: int = 2,
+        width: float = 1.0,
+        lr: float = 1e-3,
+        lr_step_epochs: int = 0,
+        lr_gamma: float = 0.1,
+        momentum: float = 0.9,
+        weight_decay: float = 5e-4,
+        channels_last: bool = False,
+    ):
+        super().__init__()
+        self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
+        self.configure_models()
+        self.configure_metrics()
+
+    def configure_models(self) -> None:
+        self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width)
+        if self.hparams.channels_last:
+            self.model = self.model.to(memory_format=torch.channels_last)
+
+    def configure_metrics(self) -> None:
+        n = self.hparams.num_classes
+        if n == 2:  # path or not: the paper's accuracy, precision, recall and IoU of the path class
+            metrics = MetricCollection(
+                {"accuracy": BinaryAccuracy(), "precision": BinaryPrecision(), "recall": BinaryRecall(), "iou": BinaryJaccardIndex()}
+            )
+        else:
+            metrics = MetricCollection(
+                {"accuracy": MulticlassAccuracy(n, average="micro"), "iou": MulticlassJaccardIndex(n, average="macro")}
+            )
+        self.train_metrics = metrics.clone(prefix="train/")
+        self.val_metrics = metrics.clone(prefix="val/")
+        self.test_metrics = metrics.clone(prefix="test/")
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:  # (N, 3, H, W) -> scores (N, C, H, W)
+        if self.hparams.channels_last:
+            image = image.contiguous(memory_format=torch.channels_last)
+        return self.model(image)
+
+    def _step(self, batch: dict, metrics: MetricCollection, split: str) -> torch.Tensor:
+        scores = self(batch["image"])
+        loss = F.cross_entropy(scores, batch["target"])
+        metrics.update(scores.argmax(dim=1), batch["target"])
+        self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(scores))
+        self.log_dict(metrics, on_step=False, on_epoch=True)
+        return loss
+
+    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+        return self._step(batch, self.train_metrics, "train")
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, self.val_metrics, "val")
+
+    def test_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, self.test_metrics, "test")
+
+    def configure_optimizers(self):
+        hp = self.hparams
+        optimizer = torch.optim.SGD(self.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
+        if hp.lr_step_epochs <= 0:
+            return optimizer
+        scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
