@@ -51,3 +51,13 @@ def labelled_drive(compose_config, drive, tmp_path_factory) -> Path:
     label(compose_config(f"label.in_dir={drive}", f"label.out_dir={out / 'labels'}", f"label.metrics_path={out / 'm.json'}",
                          "label.workers=1", "mlflow.enabled=false"))  # fmt: skip
     return out / "labels"
+
+
+@pytest.fixture(scope="session")
+def split_dir(compose_config, labelled_drive, tmp_path_factory) -> Path:
+    """Manifests over `labelled_drive`, with blocks small enough that every part gets frames."""
+    from offroad_path.split import split
+
+    out = tmp_path_factory.mktemp("split") / "split"
+    split(compose_config(f"split.labels_dir={labelled_drive}", f"split.out_dir={out}", "split.block_m=4", "split.guard_m=3"))
+    return out

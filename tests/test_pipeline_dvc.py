@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -13,6 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from offroad_path.models import MODELS
 from offroad_path.sequence import find_sequences
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,20 +36,39 @@ def repo_copy(tmp_path) -> Path:
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
     laptop = repo / "conf" / "experiment" / "laptop.yaml"
     preset = yaml.safe_load(laptop.read_text())
-    preset["world"].update(frames=3, width=160, height=96)
+    # Tiny but real: 12 frames of two drives, labels of the next 4 m every metre, one epoch.
+    preset["world"].update(frames=12, width=256, height=144)
     preset["synthesize"]["sequences"] = 2
+    preset["label"].update(distance_m=4.0, stride_m=1.0)
+    preset["split"] = {"block_m": 2.0, "guard_m": 1.0}
+    preset["data"].update(width=64, height=48, batch_size=2)
+    preset["model"]["width"] = 0.125
+    preset["trainer"]["max_epochs"] = 1
+    preset["pretrain"]["max_epochs"] = 1
     laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
+    (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
     subprocess.run([sys.executable, "-m", "dvc", "init", "--no-scm", "-q"], cwd=repo, check=True)
     return repo
 
 
+@pytest.mark.slow
 def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     out = dvc(repo_copy, "repro")
-    assert "Running stage 'synthesize'" in out and "Running stage 'label'" in out
+    ran = set(re.findall(r"Running stage '([^']+)'", out))
+    stages = {"synthesize", "label", "split"} | {f"{s}@{m}" for s in ("pretrain", "train_scratch", "train_pretrained") for m in MODELS}
+    assert ran == stages
     assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2
-    assert sorted(p.name for p in (repo_copy / "data" / "labels").iterdir()) == ["seq_000", "seq_001", "summary.json"]
-    assert json.loads((repo_copy / "metrics" / "label.json").read_text())["sequences"] == 2
+    assert json.loads((repo_copy / "metrics" / "label.json").read_text())["labels"] > 0
+    for model in MODELS:
+        for pretraining in ("none", "segmentation"):
+            run = repo_copy / "data" / "runs" / f"{model}-{pretraining}"
+            assert (run / "predictions" / "manifest.csv").is_file() and (run / "checkpoints" / "best.ckpt").is_file()
     assert "Data and pipelines are up to date" in dvc(repo_copy, "repro")
-    world = repo_copy / "conf" / "world" / "default.yaml"
-    world.write_text(world.read_text().replace("hill_height_m: 4.0", "hill_height_m: 2.0"))
-    assert "Running stage 'synthesize'" in dvc(repo_copy, "repro")
+    # A U-Net setting reruns the U-Net stages and nothing else.
+    unet = repo_copy / "conf" / "model" / "unet.yaml"
+    unet.write_text(unet.read_text().replace("laptop_lr: 0.03", "laptop_lr: 0.02"))
+    assert set(re.findall(r"Running stage '([^']+)'", dvc(repo_copy, "repro"))) == {
+        "pretrain@unet",
+        "train_scratch@unet",
+        "train_pretrained@unet",
+    }

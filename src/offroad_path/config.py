@@ -155,6 +155,9 @@ class ModelConfig:
     name: str = MISSING  # segnet | fcn | unet
     width: float = 1.0  # channel multiplier: 1 is the original network
     lr: float = 1e-3
+    # The learning rate experiment=laptop uses: narrow networks on small inputs for a few epochs
+    # learn nothing in that time at the paper's rates.
+    laptop_lr: float = 1e-2
     lr_step_epochs: int = 0  # step decay every N epochs (0: fixed learning rate)
     lr_gamma: float = 0.1
     momentum: float = 0.9
@@ -184,6 +187,7 @@ class TrainerConfig:
 @dataclass
 class PretrainConfig:
     out_dir: str = "data/pretrain/${model.name}"
+    max_epochs: int | None = None  # None: trainer.max_epochs
 
 
 @dataclass

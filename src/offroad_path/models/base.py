@@ -13,7 +13,8 @@ def scaled(channels: int, width: float) -> int:
 
 
 def conv_bn_relu(cin: int, cout: int, batch_norm: bool = True) -> list[nn.Module]:
-    layers: list[nn.Module] = [nn.Conv2d(cin, cout, 3, padding=1, bias=not batch_norm)]
+    # Biases even before batch norm, as VGG16-BN has them: its ImageNet weights then load whole.
+    layers: list[nn.Module] = [nn.Conv2d(cin, cout, 3, padding=1)]
     if batch_norm:
         layers.append(nn.BatchNorm2d(cout))
     layers.append(nn.ReLU(inplace=True))

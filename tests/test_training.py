@@ -1,0 +1,145 @@
+"""Training and pretraining on tiny inputs: every architecture runs, resume continues, MLflow
+records runs (children of a sweep in a multirun), pretrained weights load or fail clearly."""
+
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from offroad_path.models import build_model
+from offroad_path.pretrain import pretrain
+from offroad_path.train import train
+from offroad_path.training.pretrained import from_imagenet_vgg, from_segmentation
+
+TINY = ("model.width=0.125", "data.width=64", "data.height=48", "data.batch_size=2", "trainer.accelerator=cpu", "train.sample_images=1")
+
+
+def tiny(compose_config, split_dir: Path, tmp_path: Path, *overrides: str):
+    return compose_config(
+        *TINY, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path / 'run'}", f"pretrain.out_dir={tmp_path / 'pretrain'}",
+        f"mlflow.tracking_uri=sqlite:///{tmp_path / 'mlflow.db'}", *overrides,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("model", ["segnet", "fcn", "unet"])
+def test_fast_dev_run_trains_tests_and_writes_confidence_maps(compose_config, split_dir, tmp_path, model):
+    metrics = train(tiny(compose_config, split_dir, tmp_path, f"model={model}", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
+    assert 0.0 <= metrics["test/iou"] <= 1.0
+    predictions = sorted((tmp_path / "run" / "predictions").rglob("*.npy"))
+    test_rows = (split_dir / "test.csv").read_text().splitlines()[1:]
+    assert len(predictions) == len(test_rows)
+    confidence = np.load(predictions[0])
+    assert confidence.dtype == np.float16 and confidence.shape == (288, 512)  # the label's size, not the input's
+    assert confidence.min() >= 0.0 and confidence.max() <= 1.0
+
+
+def test_pretrain_then_fine_tune_from_it(compose_config, split_dir, tmp_path):
+    cfg = tiny(compose_config, split_dir, tmp_path, "model=unet", "trainer.max_epochs=1", "mlflow.enabled=false")
+    assert pretrain(cfg)["best_val_iou"] is not None
+    checkpoint = tmp_path / "pretrain" / "checkpoints" / "best.ckpt"
+    saved = {k.removeprefix("model."): v for k, v in torch.load(checkpoint, weights_only=False)["state_dict"].items()}
+    model = build_model("unet", 2, 0.125)
+    loaded = from_segmentation(model, checkpoint, "unet", 0.125)
+    assert len(loaded) == len(saved) - 2  # all but the 8-class classifier's weight and bias
+    for name in loaded:
+        assert torch.equal(model.state_dict()[name], saved[name])
+    assert model.classifier.out_channels == 2
+    fine = train(tiny(compose_config, split_dir, tmp_path, "model=unet", "pretraining=segmentation", f"pretraining.checkpoint={checkpoint}",
+                      "trainer.fast_dev_run=true", "mlflow.enabled=false"))  # fmt: skip
+    assert "test/iou" in fine
+    with pytest.raises(ValueError, match=r"holds a unet of width 0\.125, not the segnet"):
+        from_segmentation(build_model("segnet", 2, 0.125), checkpoint, "segnet", 0.125)
+
+
+def test_resume_continues_the_step_count_and_mlflow_has_the_run(compose_config, split_dir, tmp_path):
+    first = train(tiny(compose_config, split_dir, tmp_path, "model=fcn", "trainer.max_epochs=1"))
+    second = train(tiny(compose_config, split_dir, tmp_path, "model=fcn", "trainer.max_epochs=2"))
+    assert first["global_step"] > 0 and second["global_step"] == 2 * first["global_step"]
+    with sqlite3.connect(tmp_path / "mlflow.db") as db:
+        runs = db.execute("select run_uuid, name from runs").fetchall()
+        keys = {k for (k,) in db.execute("select distinct key from metrics")}
+        artifacts = db.execute("select count(*) from runs").fetchone()[0]
+    assert len(runs) == artifacts == 2 and all(name == "train fcn-none" for _, name in runs)
+    assert {"train/loss_epoch", "val/iou", "val/precision", "val/recall", "val/accuracy", "test/iou"} <= keys
+
+
+def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path):
+    db = tmp_path / "mlflow.db"
+    overrides = [*TINY, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path}/runs/${{model.name}}", "trainer.fast_dev_run=true",
+                 f"mlflow.tracking_uri=sqlite:///{db}", f"hydra.sweep.dir={tmp_path / 'sweep'}"]  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, "-m", "offroad_path.train", "-m", "model=unet,fcn", *overrides], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    with sqlite3.connect(db) as con:
+        tags = con.execute("select run_uuid, key, value from tags").fetchall()
+    sweeps = {r for r, k, v in tags if k == "sweep_dir" and v == str(tmp_path / "sweep")}
+    children = {r for r, k, v in tags if k == "mlflow.parentRunId" and v in sweeps}
+    assert len(sweeps) == 1 and len(children) == 2
+
+
+def write_vgg(path: Path, batch_norm: bool, width: float = 1.0) -> None:
+    """A file in torchvision's VGG16(-BN) state-dict layout, with random tensors."""
+    state, index, cin = {}, 0, 3
+    for stage in ((64, 64), (128, 128), (256, 256, 256), (512, 512, 512), (512, 512, 512)):
+        for c in stage:
+            c = round(c * width)
+            state[f"features.{index}.weight"], state[f"features.{index}.bias"] = torch.randn(c, cin, 3, 3), torch.randn(c)
+            if batch_norm:
+                for attr in ("weight", "bias", "running_mean", "running_var"):
+                    state[f"features.{index + 1}.{attr}"] = torch.rand(c)
+            index += 3 if batch_norm else 2
+            cin = c
+        index += 1  # the max-pool
+    fc = round(4096 * width)
+    state |= {"classifier.0.weight": torch.randn(fc, cin * 49), "classifier.0.bias": torch.randn(fc),
+              "classifier.3.weight": torch.randn(fc, fc), "classifier.3.bias": torch.randn(fc),
+              "classifier.6.weight": torch.randn(1000, fc), "classifier.6.bias": torch.randn(1000)}  # fmt: skip
+    torch.save(state, path)
+
+
+def test_imagenet_weights_load_into_every_encoder_layer(tmp_path):
+    write_vgg(tmp_path / "vgg16_bn.pth", batch_norm=True)
+    segnet = build_model("segnet", 2, 1.0)
+    loaded = from_imagenet_vgg(segnet, tmp_path / "vgg16_bn.pth")
+    assert len(loaded) == 13 * 2 + 13 * 4  # every encoder convolution and batch norm
+    source = torch.load(tmp_path / "vgg16_bn.pth")
+    assert torch.equal(segnet.encoder[0][0].weight, source["features.0.weight"])
+    assert torch.equal(segnet.encoder[4][-2].running_var, source["features.41.running_var"])
+
+
+def test_imagenet_fc_layers_become_fcn_convolutions(tmp_path):
+    write_vgg(tmp_path / "vgg16.pth", batch_norm=False, width=0.125)
+    fcn = build_model("fcn", 2, 0.125)
+    loaded = from_imagenet_vgg(fcn, tmp_path / "vgg16.pth")
+    assert len(loaded) == 13 * 2 + 4
+    source = torch.load(tmp_path / "vgg16.pth")
+    assert torch.equal(fcn.fc6[0].weight.flatten(1), source["classifier.0.weight"])
+
+
+def test_imagenet_errors_name_the_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothing is downloaded"):
+        from_imagenet_vgg(build_model("segnet", 2, 1.0), tmp_path / "missing.pth")
+    write_vgg(tmp_path / "vgg16.pth", batch_norm=False, width=0.125)
+    with pytest.raises(ValueError, match=r"vgg16\.pth: has 13 convolutions and 0 batch norms; this encoder needs VGG16-BN"):
+        from_imagenet_vgg(build_model("segnet", 2, 0.125), tmp_path / "vgg16.pth")
+    (tmp_path / "junk.pth").write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match=r"junk\.pth: not a PyTorch state dict"):
+        from_imagenet_vgg(build_model("fcn", 2, 0.125), tmp_path / "junk.pth")
+    with pytest.raises(ValueError, match="not this model"):
+        from_imagenet_vgg(build_model("unet", 2, 0.125), tmp_path / "vgg16.pth")
+
+
+def test_unknown_choices_list_the_valid_ones(compose_config, split_dir, tmp_path):
+    from hydra.errors import ConfigCompositionException
+
+    with pytest.raises(ConfigCompositionException, match="model"):
+        compose_config("model=deeplab")
+    with pytest.raises(ValueError, match="valid: none, segmentation, imagenet"):
+        train(tiny(compose_config, split_dir, tmp_path, "pretraining.name=places365", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
