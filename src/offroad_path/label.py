@@ -16,19 +16,16 @@ import logging
 from pathlib import Path
 
 import cv2
-import hydra
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.config import register_configs
 from offroad_path.labelling.labeller import label_sequence
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
-from offroad_path.utils.cli import clear_errors
+from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.parallel import map_processes
 from offroad_path.utils.tracking import stage_run
 
-register_configs()
 log = logging.getLogger("offroad_path.label")
 
 
@@ -77,10 +74,7 @@ def label(cfg: DictConfig) -> dict:
     return metrics
 
 
-@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    with clear_errors():
-        label(cfg)
+main = hydra_stage(label)
 
 
 if __name__ == "__main__":

@@ -11,15 +11,12 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig
 
-from offroad_path.config import register_configs
 from offroad_path.training.run import fit
-from offroad_path.utils.cli import clear_errors
+from offroad_path.utils.cli import hydra_stage
 from offroad_path.world.classes import CLASS_NAMES
 
-register_configs()
 log = logging.getLogger("offroad_path.pretrain")
 
 
@@ -32,10 +29,7 @@ def pretrain(cfg: DictConfig) -> dict:
     return metrics
 
 
-@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    with clear_errors():
-        pretrain(cfg)
+main = hydra_stage(pretrain)
 
 
 if __name__ == "__main__":

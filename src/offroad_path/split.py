@@ -12,19 +12,16 @@ import json
 import logging
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.config import register_configs
 from offroad_path.data.manifest import Sample, write_manifest
 from offroad_path.data.splitting import Frame, split_frames
 from offroad_path.sequence.poses import read_poses
 from offroad_path.sequence.reader import open_sequence
 from offroad_path.utils.atomic import atomic_directory
-from offroad_path.utils.cli import clear_errors
+from offroad_path.utils.cli import hydra_stage
 
-register_configs()
 log = logging.getLogger("offroad_path.split")
 
 
@@ -72,10 +69,7 @@ def split(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    with clear_errors():
-        split(cfg)
+main = hydra_stage(split)
 
 
 if __name__ == "__main__":

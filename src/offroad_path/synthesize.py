@@ -8,16 +8,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig
 
-from offroad_path.config import register_configs
 from offroad_path.utils.atomic import atomic_directory
-from offroad_path.utils.cli import clear_errors, log
+from offroad_path.utils.cli import hydra_stage, log
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.record import record_sequences
-
-register_configs()
 
 
 def synthesize(cfg: DictConfig) -> list[dict]:
@@ -32,10 +28,7 @@ def synthesize(cfg: DictConfig) -> list[dict]:
     return summaries
 
 
-@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    with clear_errors():
-        synthesize(cfg)
+main = hydra_stage(synthesize)
 
 
 if __name__ == "__main__":

@@ -13,14 +13,11 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig
 
-from offroad_path.config import register_configs
 from offroad_path.training.run import fit, write_confidence_maps
-from offroad_path.utils.cli import clear_errors
+from offroad_path.utils.cli import hydra_stage
 
-register_configs()
 log = logging.getLogger("offroad_path.train")
 
 
@@ -33,10 +30,7 @@ def train(cfg: DictConfig) -> dict:
     return metrics
 
 
-@hydra.main(config_path="../../conf", config_name="config", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    with clear_errors():
-        train(cfg)
+main = hydra_stage(train)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import hydra
+from omegaconf import DictConfig
 
 from offroad_path.sequence.errors import SequenceError
 
@@ -22,3 +27,21 @@ def clear_errors() -> Iterator[None]:
     except (SequenceError, FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT) from e
+
+
+CONF_DIR = Path(__file__).resolve().parents[3] / "conf"
+
+
+def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
+    """The Hydra entry point of a stage: the project's config, typed by its schemas, and clear
+    errors on bad input."""
+    from offroad_path.config import register_configs
+
+    register_configs()
+
+    @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
+    def main(cfg: DictConfig) -> None:
+        with clear_errors():
+            stage(cfg)
+
+    return main
