@@ -25,7 +25,7 @@ from offroad_path.labelling.overlay import overlay
 from offroad_path.training.pretrained import initialise
 from offroad_path.training.task import SegmentationTask
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
-from offroad_path.utils.tracking import flatten, multirun_parent, tracking_uri
+from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 from offroad_path.world.preview import colour_semantic
 
 log = logging.getLogger(__name__)
@@ -65,6 +65,7 @@ def mlflow_logger(cfg: DictConfig, stage: str) -> MLFlowLogger | None:
     if parent:
         tags["mlflow.parentRunId"] = parent
     # The tracking URI is always explicit: Lightning's logger would otherwise fall back to ./mlruns.
+    experiment_id(cfg.mlflow)  # created with its artifact location, which the logger would not set
     logger = MLFlowLogger(experiment_name=cfg.mlflow.experiment, run_name=f"{stage} {cfg.model.name}-{cfg.pretraining.name}",
                           tracking_uri=tracking_uri(cfg.mlflow), tags=tags)  # fmt: skip
     logger.log_hyperparams(flatten(OmegaConf.to_container(cfg, resolve=True)))

@@ -16,6 +16,25 @@ def tracking_uri(cfg: DictConfig) -> str:
     return cfg.tracking_uri or os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{Path.cwd() / 'mlflow.db'}"
 
 
+def artifact_location(cfg: DictConfig) -> str | None:
+    """Artifacts of a SQLite store live beside the database file, in mlartifacts/ (not ./mlruns)."""
+    uri = tracking_uri(cfg)
+    if uri.startswith("sqlite:///"):
+        return str(Path(uri.removeprefix("sqlite:///")).resolve().parent / "mlartifacts")
+    return None
+
+
+def experiment_id(cfg: DictConfig) -> str:
+    """The configured experiment's id, creating it (with its artifact location) if needed."""
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri(cfg))
+    experiment = client.get_experiment_by_name(cfg.experiment)
+    if experiment is not None:
+        return experiment.experiment_id
+    return client.create_experiment(cfg.experiment, artifact_location=artifact_location(cfg))
+
+
 def flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
     if isinstance(tree, dict):
         out: dict[str, Any] = {}
@@ -34,8 +53,7 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
     import mlflow
 
     mlflow.set_tracking_uri(tracking_uri(cfg.mlflow))
-    mlflow.set_experiment(cfg.mlflow.experiment)
-    with mlflow.start_run(run_name=stage) as run:
+    with mlflow.start_run(experiment_id=experiment_id(cfg.mlflow), run_name=stage) as run:
         mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
         mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
         yield run
@@ -53,11 +71,10 @@ def multirun_parent(cfg: DictConfig) -> str | None:
 
     sweep = str(HydraConfig.get().sweep.dir)
     client = MlflowClient(tracking_uri(cfg.mlflow))
-    experiment = client.get_experiment_by_name(cfg.mlflow.experiment)
-    experiment_id = experiment.experiment_id if experiment else client.create_experiment(cfg.mlflow.experiment)
-    found = client.search_runs([experiment_id], filter_string=f"tags.sweep_dir = '{sweep}'", max_results=1)
+    experiment = experiment_id(cfg.mlflow)
+    found = client.search_runs([experiment], filter_string=f"tags.sweep_dir = '{sweep}'", max_results=1)
     if found:
         return found[0].info.run_id
-    parent = client.create_run(experiment_id, run_name=f"sweep {Path(sweep).name}", tags={"sweep_dir": sweep, "stage": "sweep"})
+    parent = client.create_run(experiment, run_name=f"sweep {Path(sweep).name}", tags={"sweep_dir": sweep, "stage": "sweep"})
     client.set_terminated(parent.info.run_id)
     return parent.info.run_id
