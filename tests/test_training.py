@@ -145,3 +145,11 @@ def test_unknown_choices_list_the_valid_ones(compose_config, split_dir, tmp_path
         compose_config("model=deeplab")
     with pytest.raises(ValueError, match="valid: none, segmentation, imagenet"):
         train(tiny(compose_config, split_dir, tmp_path, "pretraining.name=places365", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
+
+
+def test_same_seed_same_metrics(compose_config, split_dir, tmp_path):
+    runs = [
+        train(tiny(compose_config, split_dir, tmp_path / str(i), "model=segnet", "trainer.max_epochs=1", "mlflow.enabled=false"))
+        for i in range(2)
+    ]
+    assert runs[0] == runs[1]

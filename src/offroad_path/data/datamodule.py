@@ -16,7 +16,7 @@ class OffroadDataModule(L.LightningDataModule):
 
     def __init__(self, split_dir: str, target: str = "path", width: int = 512, height: int = 288, batch_size: int = 6,
                  num_workers: int = 0, pin_memory: bool = False, augment: bool = True, jitter: float = 0.2,
-                 min_scale: float = 0.8):  # fmt: skip
+                 min_scale: float = 0.8, seed: int = 0):  # fmt: skip
         super().__init__()
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
         self.split_dir = Path(split_dir)
@@ -29,7 +29,7 @@ class OffroadDataModule(L.LightningDataModule):
 
     def _loader(self, name: str, train: bool) -> DataLoader:
         hp = self.hparams
-        transform = transforms(hp.width, hp.height, augment=train and hp.augment, jitter=hp.jitter, min_scale=hp.min_scale)
+        transform = transforms(hp.width, hp.height, augment=train and hp.augment, jitter=hp.jitter, min_scale=hp.min_scale, seed=hp.seed)
         dataset = ManifestDataset(self.samples[name], hp.target, transform)
         return DataLoader(dataset, batch_size=hp.batch_size, shuffle=train, drop_last=train and len(dataset) > hp.batch_size,
                           num_workers=hp.num_workers, pin_memory=hp.pin_memory, persistent_workers=hp.num_workers > 0)  # fmt: skip

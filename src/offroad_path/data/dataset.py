@@ -47,7 +47,7 @@ def load_depth(sample: Sample) -> np.ndarray:
     return np.ascontiguousarray(depth[:, ::-1]) if sample.mirrored else depth
 
 
-def transforms(width: int, height: int, augment: bool, jitter: float = 0.2, min_scale: float = 0.8) -> A.Compose:
+def transforms(width: int, height: int, augment: bool, jitter: float = 0.2, min_scale: float = 0.8, seed: int = 0) -> A.Compose:
     """Resize to the network's input (nearest for the target), with photometric jitter and a small
     random scale and crop when augmenting; flips are already in the data as mirrored copies."""
     ops: list = []
@@ -59,7 +59,8 @@ def transforms(width: int, height: int, augment: bool, jitter: float = 0.2, min_
         ]
     else:
         ops.append(A.Resize(height, width))
-    return A.Compose([*ops, A.Normalize(), ToTensorV2()])
+    # Albumentations draws from its own generator, seeded here: unseeded, it reads OS entropy.
+    return A.Compose([*ops, A.Normalize(), ToTensorV2()], seed=seed)
 
 
 class ManifestDataset(Dataset):

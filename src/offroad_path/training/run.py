@@ -81,7 +81,7 @@ def fit(
     L.seed_everything(cfg.train.seed, workers=True)
     d, m, t = cfg.data, cfg.model, cfg.trainer
     data = OffroadDataModule(
-        d.split_dir, target, d.width, d.height, d.batch_size, d.num_workers, d.pin_memory, d.augment, d.jitter, d.min_scale
+        d.split_dir, target, d.width, d.height, d.batch_size, d.num_workers, d.pin_memory, d.augment, d.jitter, d.min_scale, cfg.train.seed
     )
     task = SegmentationTask(m.name, num_classes, m.width, m.lr, m.lr_step_epochs, m.lr_gamma, m.momentum, m.weight_decay, t.channels_last)
     loaded = initialise(task.model, pretraining, cfg.pretraining, m.name, m.width)
