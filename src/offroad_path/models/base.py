@@ -21,6 +21,18 @@ def conv_bn_relu(cin: int, cout: int, batch_norm: bool = True) -> list[nn.Module
     return layers
 
 
+def conv_stages(stages: list[list[int]], in_channels: int, batch_norm: bool = True) -> list[list[nn.Module]]:
+    """The layers of a stack of conv stages (VGG's, the encoder's): each conv's output channels."""
+    out, cin = [], in_channels
+    for stage in stages:
+        layers: list[nn.Module] = []
+        for cout in stage:
+            layers += conv_bn_relu(cin, cout, batch_norm)
+            cin = cout
+        out.append(layers)
+    return out
+
+
 class SegmentationNet(nn.Module):
     """Per-pixel class scores (N, C, H, W) for images (N, 3, H, W) of any size.
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from offroad_path.models.base import SegmentationNet, conv_bn_relu, scaled
+from offroad_path.models.base import SegmentationNet, conv_stages, scaled
 from offroad_path.models.segnet import VGG16
 
 
@@ -30,15 +30,10 @@ class FCN8s(SegmentationNet):
     def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3, dropout: float = 0.5):
         super().__init__(num_classes)
         stages = [[scaled(c, width) for c in stage] for stage in VGG16]
-        self.features = nn.ModuleList()
-        cin = in_channels
-        for stage in stages:
-            layers = []
-            for cout in stage:
-                layers += conv_bn_relu(cin, cout, batch_norm=False)
-                cin = cout
-            layers.append(nn.MaxPool2d(2, 2))
-            self.features.append(nn.Sequential(*layers))
+        self.features = nn.ModuleList(
+            nn.Sequential(*layers, nn.MaxPool2d(2, 2)) for layers in conv_stages(stages, in_channels, batch_norm=False)
+        )
+        cin = stages[-1][-1]
         fc = scaled(4096, width)
         self.fc6 = nn.Sequential(nn.Conv2d(cin, fc, 7, padding=3), nn.ReLU(inplace=True), nn.Dropout2d(dropout))
         self.fc7 = nn.Sequential(nn.Conv2d(fc, fc, 1), nn.ReLU(inplace=True), nn.Dropout2d(dropout))

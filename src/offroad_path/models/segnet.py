@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from offroad_path.models.base import SegmentationNet, conv_bn_relu, scaled
+from offroad_path.models.base import SegmentationNet, conv_stages, scaled
 
 # VGG16 stages: output channels of each 3x3 convolution, a max-pool after each stage.
 VGG16 = ((64, 64), (128, 128), (256, 256, 256), (512, 512, 512), (512, 512, 512))
@@ -20,25 +20,14 @@ class SegNet(SegmentationNet):
     def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3):
         super().__init__(num_classes)
         stages = [[scaled(c, width) for c in stage] for stage in VGG16]
-        self.encoder = nn.ModuleList()
-        cin = in_channels
-        for stage in stages:
-            layers = []
-            for cout in stage:
-                layers += conv_bn_relu(cin, cout)
-                cin = cout
-            self.encoder.append(nn.Sequential(*layers))
+        self.encoder = nn.ModuleList(nn.Sequential(*layers) for layers in conv_stages(stages, in_channels))
         # Decoder stage i mirrors encoder stage i: same convolutions in reverse, ending on the
         # channel count that entered the encoder stage (the first stage ends on the classifier).
         self.decoder = nn.ModuleList()
         for i in reversed(range(len(stages))):
             stage = stages[i]
             outs = [*stage[::-1][1:], stages[i - 1][-1] if i > 0 else stage[0]]
-            layers = []
-            cin = stage[-1]
-            for cout in outs:
-                layers += conv_bn_relu(cin, cout)
-                cin = cout
+            (layers,) = conv_stages([outs], stage[-1])
             self.decoder.append(nn.Sequential(*layers))
         self.classifier = nn.Conv2d(stages[0][0], num_classes, 3, padding=1)
         self.pool = nn.MaxPool2d(2, 2, return_indices=True)
