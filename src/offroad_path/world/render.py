@@ -1,9 +1,11 @@
 """A vectorised ray caster for the off-road world: exact depth, semantic class and a shaded image.
 
 Terrain: each pixel's ray marches the height field with steps no longer than the clearance over
-the slope bound allows (relaxed with distance), then bisects the crossing and finishes with one
-secant step, so the hit point lies on the bilinear surface to well under a millimetre.
-Objects: exact analytic intersections, each object only on the pixels of its projected bounds.
+the slope bound allows (relaxed with distance), longer where the ray is above all terrain within
+4 m or 16 m (max-filtered copies of the height field); the crossing is then refined by bisection
+and false position, so the hit lies on the bilinear surface to well under a millimetre (a test
+checks 1 mm). Objects: exact analytic intersections, each object only on the pixels of its
+tangent-plane screen bounds.
 """
 
 from __future__ import annotations
