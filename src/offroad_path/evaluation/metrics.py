@@ -1,0 +1,112 @@
+"""Pixel counts and the paper's scores (Holder & Breckon 2018, section V).
+
+The paper pools tp, fp, tn, fn over the whole test set before computing accuracy, recall,
+precision and IoU; a per-image mean IoU is reported beside it, labelled as such, because the two
+differ when images have paths of very different sizes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torchmetrics.classification import BinaryPrecisionRecallCurve
+from torchmetrics.functional.classification import binary_stat_scores
+
+
+@dataclass(frozen=True)
+class Scores:
+    accuracy: float
+    recall: float
+    precision: float
+    iou: float
+
+
+def counts(confidence: np.ndarray, target: np.ndarray, threshold: float = 0.5) -> np.ndarray:
+    """Per-image pixel counts (N, 4) int64 columns tp, fp, tn, fn; path where confidence > threshold.
+
+    confidence: (N, H, W) float in [0, 1]; target: (N, H, W) bool or 0/1.
+    """
+    if confidence.shape != target.shape:
+        raise ValueError(f"predictions {confidence.shape} and ground truth {target.shape} differ in shape")
+    n = len(confidence)
+    # torchmetrics thresholds with >=; the paper's rule is C > threshold.
+    preds = (torch.from_numpy(np.ascontiguousarray(confidence, np.float32)).flatten(1) > threshold).long()
+    truth = torch.from_numpy(np.ascontiguousarray(target)).flatten(1).long()
+    if n == 1:  # torchmetrics 1.9 squeezes a samplewise batch of one into a shape error: score it twice
+        preds, truth = preds.repeat(2, 1), truth.repeat(2, 1)
+    stats = binary_stat_scores(preds, truth, multidim_average="samplewise")
+    return stats[:n, :4].numpy().astype(np.int64)  # (N, [tp, fp, tn, fn])
+
+
+def scores(tp: float, fp: float, tn: float, fn: float) -> Scores:
+    """The paper's four scores from (pooled) counts; a score whose denominator is 0 is nan."""
+
+    def ratio(a: float, b: float) -> float:
+        return float(a / b) if b else float("nan")
+
+    return Scores(ratio(tp + tn, tp + fp + tn + fn), ratio(tp, tp + fn), ratio(tp, tp + fp), ratio(tp, tp + fp + fn))
+
+
+def pooled(per_image: np.ndarray) -> Scores:
+    """Scores of the counts summed over all images (the paper's convention)."""
+    return scores(*per_image.sum(axis=0).tolist())
+
+
+def per_image_iou(per_image: np.ndarray) -> np.ndarray:
+    """IoU of each image (N,); an image with no path in either prediction or truth scores 1."""
+    tp, fp, _, fn = per_image.T.astype(np.float64)
+    union = tp + fp + fn
+    return np.where(union > 0, tp / np.maximum(union, 1), 1.0)
+
+
+def precision_recall_curve(confidence: np.ndarray, target: np.ndarray, thresholds: int = 101, batch: int = 16) -> dict[str, np.ndarray]:
+    """Pooled precision and recall at `thresholds` evenly spaced thresholds in [0, 1] (binned, so
+    memory does not grow with the test set). Returns arrays threshold, precision, recall."""
+    curve = BinaryPrecisionRecallCurve(thresholds=thresholds)
+    for start in range(0, len(confidence), batch):
+        c = torch.from_numpy(np.ascontiguousarray(confidence[start : start + batch], np.float32))
+        curve.update(c.flatten(), torch.from_numpy(np.ascontiguousarray(target[start : start + batch])).flatten().long())
+    precision, recall, threshold = curve.compute()
+    # torchmetrics appends the (precision 1, recall 0) end point without a threshold, and gives nan
+    # precision where nothing is predicted: 1 by the same convention (no false positives).
+    return {"threshold": threshold.numpy(), "precision": np.nan_to_num(precision[:-1].numpy(), nan=1.0), "recall": recall[:-1].numpy()}
+
+
+def non_corresponding(predicted: np.ndarray, target: np.ndarray, groups: list) -> Scores:
+    """The paper's baseline: every prediction scored against every ground truth of a different
+    input image, averaged over those pairs. Images of one group (a frame and its mirrored copy)
+    are not scored against each other.
+
+    predicted, target: (N, H, W) bool; groups: N hashable ids.
+    """
+    n = len(predicted)
+    P = torch.from_numpy(np.ascontiguousarray(predicted)).flatten(1).double()  # (N, HW)
+    T = torch.from_numpy(np.ascontiguousarray(target)).flatten(1).double()  # (N, HW)
+    tp = P @ T.T  # (N, N): prediction i against truth j
+    fp = P.sum(1, keepdim=True) - tp
+    fn = T.sum(1)[None, :] - tp
+    tn = P.shape[1] - tp - fp - fn
+    codes = {g: i for i, g in enumerate(dict.fromkeys(groups))}
+    g = torch.tensor([codes[x] for x in groups])
+    pairs = g[:, None] != g[None, :]  # (N, N)
+    if n < 2 or not pairs.any():
+        raise ValueError("the non-corresponding baseline needs images of at least two different frames")
+    union = tp + fp + fn
+
+    def mean(x: torch.Tensor) -> float:
+        return float(torch.nanmean(x[pairs]))  # nan: a pair whose score is undefined (no path in it)
+
+    iou = torch.where(union > 0, tp / union.clamp(min=1), torch.ones_like(tp))
+    return Scores(
+        accuracy=mean((tp + tn) / P.shape[1]),
+        recall=mean(torch.where(tp + fn > 0, tp / (tp + fn).clamp(min=1), torch.full_like(tp, float("nan")))),
+        precision=mean(torch.where(tp + fp > 0, tp / (tp + fp).clamp(min=1), torch.full_like(tp, float("nan")))),
+        iou=mean(iou),
+    )
+
+
+def mean_path(labels: np.ndarray) -> np.ndarray:
+    """The 'mean path' prior: the per-pixel average of training labels (N, H, W) -> (H, W) in [0, 1]."""
+    return labels.mean(axis=0, dtype=np.float64).astype(np.float32)
