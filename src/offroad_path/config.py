@@ -199,6 +199,31 @@ class TrainConfig:
 
 
 @dataclass
+class PostprocessConfig:
+    predictions_dir: str = "${train.out_dir}/predictions"  # the train stage's test-set confidence maps
+    out_dir: str = "data/postprocessed/${model.name}-${pretraining.name}"
+    max_depth_m: float = 20.0  # D: confidence beyond this stereo depth (or of unknown depth) is set to 0
+    sigma: float = 6.0  # Gaussian blur, pixels of the label-sized map
+    delta: float = 0.025  # confidence below this is set to 0
+    use_depth: bool = True
+
+
+@dataclass
+class EvaluateConfig:
+    runs: list[str] = field(default_factory=lambda: [f"{m}-{p}" for m in ("segnet", "fcn", "unet") for p in ("none", "segmentation")])
+    runs_dir: str = "data/runs"  # <run>/predictions from train
+    postprocessed_dir: str = "data/postprocessed"  # <run>/ from postprocess
+    train_manifest: str = "${split.out_dir}/train.csv"  # for the mean-path prior
+    threshold: float = 0.5  # path where C > threshold
+    pr_thresholds: int = 101
+    out_dir: str = "data/evaluation"  # results table, figures
+    metrics_path: str = "metrics/evaluation.json"
+    plots_dir: str = "metrics/precision_recall"  # one CSV per run, for `dvc plots`
+    figure_scale: float = 0.5  # figures at half the label size keep the PNGs small
+    figure_cases: int = 1  # good and bad cases per network in Fig. 8, and raised and lowered in Fig. 5
+
+
+@dataclass
 class MlflowConfig:
     enabled: bool = True
     experiment: str = "offroad-path"
@@ -218,6 +243,8 @@ class Config:
     trainer: TrainerConfig = field(default_factory=TrainerConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
     pretrain: PretrainConfig = field(default_factory=PretrainConfig)
+    postprocess: PostprocessConfig = field(default_factory=PostprocessConfig)
+    evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = "laptop"
 

@@ -4,10 +4,8 @@ test-set confidence maps that post-processing reads."""
 
 from __future__ import annotations
 
-import csv
 import json
 import logging
-from dataclasses import asdict
 from pathlib import Path
 
 import lightning as L
@@ -20,7 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.data.datamodule import OffroadDataModule
 from offroad_path.data.dataset import load_sample, transforms
-from offroad_path.data.manifest import COLUMNS
+from offroad_path.data.manifest import prediction_name, write_predictions_manifest
 from offroad_path.labelling.overlay import overlay
 from offroad_path.training.pretrained import initialise
 from offroad_path.training.task import SegmentationTask
@@ -123,12 +121,9 @@ def write_confidence_maps(task: SegmentationTask, data: OffroadDataModule, out_d
             image, label = load_sample(sample, "path")
             scores = task(transform(image=image)["image"][None].to(task.device))
             confidence = F.interpolate(scores.softmax(1)[:, 1:2], size=label.shape, mode="bilinear", align_corners=False)[0, 0]
-            name = f"{sample.sequence}/{sample.f0:06d}{'_mirrored' if sample.mirrored else ''}.npy"
+            name = prediction_name(sample)
             (tmp / sample.sequence).mkdir(exist_ok=True)
             np.save(tmp / name, confidence.cpu().numpy().astype(np.float16))
-            rows.append({**asdict(sample), "prediction": str(out_dir / name)})
-        with open(tmp / "manifest.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=[*COLUMNS, "prediction"])
-            writer.writeheader()
-            writer.writerows(rows)
+            rows.append((sample, str(out_dir / name)))
+        write_predictions_manifest(tmp / "manifest.csv", rows)
     return len(rows)

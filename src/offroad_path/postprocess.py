@@ -1,0 +1,69 @@
+"""Stage `postprocess`: the paper's post-processing of one run's test-set confidence maps (see
+offroad_path.postprocessing and DESIGN.md).
+
+    python -m offroad_path.postprocess model=unet pretraining=none [postprocess.sigma=4]
+
+Reads postprocess.predictions_dir (the train stage's predictions/) and the stereo disparity of each
+sample's f0 (from the label stage); writes postprocess.out_dir with the same layout: float16 .npy
+maps per sample and manifest.csv.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+from omegaconf import DictConfig
+
+from offroad_path.data.dataset import load_depth
+from offroad_path.data.manifest import prediction_name, read_predictions_manifest, write_predictions_manifest
+from offroad_path.postprocessing import PostprocessParams, postprocess
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.cli import hydra_stage
+
+log = logging.getLogger("offroad_path.postprocess")
+
+BATCH = 64  # maps in memory at once
+
+
+def load_map(path: str) -> np.ndarray:
+    try:
+        return np.load(path).astype(np.float32)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not a readable confidence map ({e})") from e
+
+
+def run_postprocess(cfg: DictConfig) -> int:
+    c = cfg.postprocess
+    params = PostprocessParams(c.max_depth_m, c.sigma, c.delta, c.use_depth)
+    rows = read_predictions_manifest(Path(c.predictions_dir) / "manifest.csv")
+    out_dir = Path(c.out_dir)
+    written, seconds = [], 0.0
+    with atomic_directory(out_dir) as tmp:
+        for start in range(0, len(rows), BATCH):
+            batch = rows[start : start + BATCH]
+            maps = np.stack([load_map(path) for _, path in batch])  # (B, H, W)
+            depth = np.stack([load_depth(sample) for sample, _ in batch]) if params.use_depth else None
+            if depth is not None and depth.shape != maps.shape:
+                raise ValueError(f"{batch[0][0].disparity}: disparity of shape {depth.shape[1:]} differs from the maps' {maps.shape[1:]}")
+            t0 = time.perf_counter()
+            filtered = postprocess(maps, depth, params)
+            seconds += time.perf_counter() - t0
+            for (sample, _), out in zip(batch, filtered, strict=True):
+                name = prediction_name(sample)
+                (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+                np.save(tmp / name, out.astype(np.float16))
+                written.append((sample, str(out_dir / name)))
+        write_predictions_manifest(tmp / "manifest.csv", written)
+    log.info("post-processed %d maps of %s into %s (%.2f ms per map)", len(written), c.predictions_dir, out_dir,
+             1000 * seconds / max(len(written), 1))  # fmt: skip
+    return len(written)
+
+
+main = hydra_stage(run_postprocess)
+
+
+if __name__ == "__main__":
+    main()
