@@ -48,7 +48,7 @@ class WorldConfig:
     max_distance_m: float = 90.0
     hill_height_m: float = 4.0
     bump_height_m: float = 0.12
-    max_curvature: float = 0.035
+    max_curvature: float = 0.09  # 1/m; the peak of a drive, reached once or twice per sequence
     track_width_m: float = 3.4
     trees_per_hectare: float = 30.0
     bushes_per_hectare: float = 80.0
