@@ -10,14 +10,27 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_world_and_labels_notebook_runs(monkeypatch):
-    if not (ROOT / "data" / "labels" / "summary.json").is_file():
-        pytest.skip("no pipeline outputs: run `dvc repro` first")
+def run_notebook(name: str, needs: list[Path], monkeypatch) -> dict:
+    """Execute a notebook's code cells top to bottom from the repository root; its namespace."""
+    for path in needs:
+        if not path.exists():
+            pytest.skip(f"no pipeline outputs ({path.relative_to(ROOT)}): run `dvc repro` first")
     monkeypatch.chdir(ROOT)
-    notebook = json.loads((ROOT / "notebooks" / "01_world_and_labels.ipynb").read_text())
+    notebook = json.loads((ROOT / "notebooks" / name).read_text())
     namespace: dict = {}
     for cell in notebook["cells"]:
         if cell["cell_type"] == "code":
-            exec(compile("".join(cell["source"]), "notebook", "exec"), namespace)
+            exec(compile("".join(cell["source"]), name, "exec"), namespace)
+    return namespace
+
+
+def test_world_and_labels_notebook_runs(monkeypatch):
+    namespace = run_notebook("01_world_and_labels.ipynb", [ROOT / "data" / "labels" / "summary.json"], monkeypatch)
     assert namespace["kept"] and namespace["mask"].any()
     assert namespace["panel"].shape == (288, 3 * 512, 3)
+
+
+def test_results_notebook_runs(monkeypatch):
+    namespace = run_notebook("02_results.ipynb", [ROOT / "data" / "evaluation" / "results.csv", ROOT / "mlflow.db"], monkeypatch)
+    assert len(namespace["results"]) == 12 and len(namespace["curves"]) == 6
+    assert namespace["evaluation"].data.tags.get("stage") == "evaluate"

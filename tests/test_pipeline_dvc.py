@@ -1,5 +1,6 @@
-"""`dvc repro` on a tiny preset in a temporary copy of the repository: runs every stage, then
-runs nothing, then reruns what a config edit touches."""
+"""`dvc repro` on a tiny preset in a temporary copy of the repository: runs every stage and
+checks each one's outputs against its contract, then runs nothing, then reruns exactly what a
+config edit touches."""
 
 from __future__ import annotations
 
@@ -55,7 +56,10 @@ def repo_copy(tmp_path) -> Path:
 def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     out = dvc(repo_copy, "repro")
     ran = set(re.findall(r"Running stage '([^']+)'", out))
-    stages = {"synthesize", "label", "split"} | {f"{s}@{m}" for s in ("pretrain", "train_scratch", "train_pretrained") for m in MODELS}
+    stages = {"synthesize", "label", "split", "evaluate"} | {
+        f"{s}@{m}" for s in ("pretrain", "train_scratch", "train_pretrained") for m in MODELS
+    }
+    stages |= {f"postprocess@{m}-{p}" for m in MODELS for p in ("none", "segmentation")}
     assert ran == stages
     assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2
     assert json.loads((repo_copy / "metrics" / "label.json").read_text())["labels"] > 0
@@ -63,6 +67,15 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
         for pretraining in ("none", "segmentation"):
             run = repo_copy / "data" / "runs" / f"{model}-{pretraining}"
             assert (run / "predictions" / "manifest.csv").is_file() and (run / "checkpoints" / "best.ckpt").is_file()
+            assert (repo_copy / "data" / "postprocessed" / f"{model}-{pretraining}" / "manifest.csv").is_file()
+    # evaluate: every run with and without post-processing, the baselines, curves and figures.
+    metrics = json.loads((repo_copy / "metrics" / "evaluation.json").read_text())
+    assert set(metrics) == {f"{m}-{p}" for m in MODELS for p in ("none", "segmentation")} | {"baselines"}
+    assert all(0 <= metrics[r][pp]["accuracy"] <= 1 for r in metrics if r != "baselines" for pp in ("raw", "postprocessed"))
+    assert len((repo_copy / "data" / "evaluation" / "results.csv").read_text().splitlines()) == 1 + 12
+    assert len(list((repo_copy / "metrics" / "precision_recall").glob("*.csv"))) == 6
+    assert {p.name for p in (repo_copy / "data" / "evaluation" / "figures").iterdir()} == {"good_and_bad_cases.png", "postprocessing.png"}
+    assert "segnet-none" in dvc(repo_copy, "metrics", "show")
     assert "Data and pipelines are up to date" in dvc(repo_copy, "repro")
     # A U-Net setting reruns the U-Net stages and nothing else.
     unet = repo_copy / "conf" / "model" / "unet.yaml"
@@ -71,4 +84,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
         "pretrain@unet",
         "train_scratch@unet",
         "train_pretrained@unet",
+        "postprocess@unet-none",
+        "postprocess@unet-segmentation",
+        "evaluate",
     }

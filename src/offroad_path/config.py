@@ -224,6 +224,55 @@ class EvaluateConfig:
 
 
 @dataclass
+class SteeringConfig:
+    """The end-to-end baseline: PilotNet regressing normalised steering from one image."""
+
+    out_dir: str = "data/steering"
+    labels_dir: str = "${split.labels_dir}"  # where each sequence's poses place its frames along the path
+    split_dir: str = "${split.out_dir}"  # the path split, whose blocks of driving this split follows
+    width: int = 256
+    height: int = 136
+    batch_size: int = 6
+    lr: float = 0.005  # CPU-sized default; experiment=paper sets the paper's 2e-4
+    lr_step_epochs: int = 5  # step decay every N epochs
+    lr_gamma: float = 0.5
+    momentum: float = 0.9
+    weight_decay: float = 0.0
+    max_epochs: int = 12
+    patience: int = 4  # early stopping on validation mean absolute error
+    mirror: bool = True  # add mirrored copies with negated steering
+    jitter: float = 0.2  # photometric augmentation (no geometric: it would change the steering)
+    seed: int = 0
+    metrics_path: str = "metrics/steering.json"
+    plots_path: str = "metrics/steering_scatter.csv"  # true and predicted steering per test frame
+
+
+@dataclass
+class PredictConfig:
+    """Run a trained path model on new footage."""
+
+    checkpoint: str | None = None  # a train checkpoint (.ckpt) or an exported model (.onnx)
+    run_id: str | None = None  # or an MLflow training run: its best checkpoint
+    input: str = MISSING  # a folder of images, a sequence folder (stereo, with calib.txt) or a video file
+    out_dir: str = "predictions"
+    threshold: float = 0.5  # path where confidence > threshold, for the overlay
+    postprocess: bool = False  # the paper's post-processing (depth mask only for stereo sequences)
+    video_fps: float | None = None  # MP4 frame rate; None: the video's own, or the sequence's times, or 10
+    max_frames: int | None = None
+    device: str = "cpu"
+
+
+@dataclass
+class ExportConfig:
+    """ONNX export of a trained path model, checked against PyTorch."""
+
+    checkpoint: str = "${train.out_dir}/checkpoints/best.ckpt"
+    out: str = "${train.out_dir}/model.onnx"
+    opset: int = 17
+    tolerance: float = 1e-4  # max abs difference of the path confidence against PyTorch
+
+
+@dataclass
 class MlflowConfig:
     enabled: bool = True
     experiment: str = "offroad-path"
@@ -245,6 +294,9 @@ class Config:
     pretrain: PretrainConfig = field(default_factory=PretrainConfig)
     postprocess: PostprocessConfig = field(default_factory=PostprocessConfig)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
+    steering: SteeringConfig = field(default_factory=SteeringConfig)
+    predict: PredictConfig = field(default_factory=PredictConfig)
+    export: ExportConfig = field(default_factory=ExportConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = "laptop"
 

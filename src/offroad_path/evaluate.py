@@ -40,13 +40,22 @@ from offroad_path.utils.tracking import stage_run, tracking_uri
 log = logging.getLogger("offroad_path.evaluate")
 
 
-def predictions(manifest: Path, samples: list[Sample] | None) -> tuple[list[Sample], list[str]]:
+def predictions(manifest: Path, made_by: str, samples: list[Sample] | None) -> tuple[list[Sample], list[str]]:
     """A predictions manifest's samples and map paths, checked against the test set seen so far."""
-    rows = read_predictions_manifest(manifest)
+    rows = read_predictions_manifest(manifest, made_by)
     found = [s for s, _ in rows]
     if samples is not None and found != samples:
         raise ValueError(f"{manifest}: lists other test samples than the runs before it (retrain on the same split)")
     return found, [p for _, p in rows]
+
+
+def baseline(predicted: np.ndarray, labels: np.ndarray, samples: list[Sample]) -> Scores:
+    """The non-corresponding baseline; undefined (nan) when the test set holds a single frame."""
+    groups = [(s.sequence, s.f0) for s in samples]
+    if len(set(groups)) < 2:
+        log.warning("the test set holds one frame: no non-corresponding baseline")
+        return Scores(*[float("nan")] * 4)
+    return non_corresponding(predicted, labels, groups)
 
 
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
@@ -61,7 +70,7 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
         model, pretraining = split_run_name(run)
         for pp, manifest in (("no", Path(e.runs_dir) / run / "predictions" / "manifest.csv"),
                              ("yes", Path(e.postprocessed_dir) / run / "manifest.csv")):  # fmt: skip
-            samples, paths[run, pp] = predictions(manifest, samples)
+            samples, paths[run, pp] = predictions(manifest, "train" if pp == "no" else "postprocess", samples)
             if not len(labels):
                 labels = load_labels(samples)
             maps = load_maps(paths[run, pp])
@@ -69,9 +78,8 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
             rows.append(row)
             if pp == "no":
                 curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
-                groups = [(s.sequence, s.f0) for s in samples]
-                baselines[f"{network_name(model)} ({pretraining}) against non-corresponding ground truth"] = non_corresponding(
-                    maps > e.threshold, labels, groups
+                baselines[f"{network_name(model)} ({pretraining}) against non-corresponding ground truth"] = baseline(
+                    maps > e.threshold, labels, samples
                 )
         log.info("%s: IoU %.3f, post-processed %.3f", run, rows[-2].iou, rows[-1].iou)
     prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold

@@ -66,5 +66,5 @@ def write_predictions_manifest(path: Path, rows: list[tuple[Sample, str]]) -> No
         writer.writerows({**asdict(sample), "prediction": prediction} for sample, prediction in rows)
 
 
-def read_predictions_manifest(path: str | Path) -> list[tuple[Sample, str]]:
-    return [(_sample(r), r["prediction"]) for r in _rows(path, PREDICTION_COLUMNS, "train")]
+def read_predictions_manifest(path: str | Path, made_by: str = "train") -> list[tuple[Sample, str]]:
+    return [(_sample(r), r["prediction"]) for r in _rows(path, PREDICTION_COLUMNS, made_by)]

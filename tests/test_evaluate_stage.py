@@ -1,0 +1,93 @@
+"""postprocess and evaluate as stages, on a real labelled drive with predictions whose scores are
+known: the labels themselves (perfect) and the labels shifted sideways."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from offroad_path.data.manifest import prediction_name, read_manifest, read_predictions_manifest, write_predictions_manifest
+from offroad_path.evaluate import evaluate
+from offroad_path.evaluation.results import load_labels
+from offroad_path.postprocess import run_postprocess
+
+SHIFT_PX = 24
+
+
+def stage_config(compose_config, split_dir: Path, root: Path, *overrides: str):
+    return compose_config(
+        f"split.out_dir={split_dir}", f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
+        f"evaluate.out_dir={root / 'evaluation'}", f"evaluate.metrics_path={root / 'metrics.json'}",
+        f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}", *overrides,
+    )  # fmt: skip
+
+
+@pytest.fixture
+def scored(compose_config, split_dir, tmp_path):
+    samples = read_manifest(split_dir / "test.csv")
+    labels = load_labels(samples).astype(np.float32)
+    made = {"unet-none": labels, "fcn-none": 0.9 * np.roll(labels, SHIFT_PX, axis=2)}
+    for run, maps in made.items():
+        out = tmp_path / "runs" / run / "predictions"
+        rows = []
+        for sample, m in zip(samples, maps, strict=True):
+            (out / sample.sequence).mkdir(parents=True, exist_ok=True)
+            np.save(out / prediction_name(sample), m.astype(np.float16))
+            rows.append((sample, str(out / prediction_name(sample))))
+        write_predictions_manifest(out / "manifest.csv", rows)
+        model, pretraining = run.split("-")
+        run_postprocess(stage_config(compose_config, split_dir, tmp_path, f"model={model}", f"pretraining={pretraining}",
+                                     f"postprocess.predictions_dir={out}", f"postprocess.out_dir={tmp_path / 'post' / run}"))  # fmt: skip
+    rows = evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]"))
+    return rows, labels.astype(bool), made
+
+
+def test_scores_match_the_known_predictions(scored):
+    rows, labels, made = scored
+    perfect, perfect_post, shifted, shifted_post = rows
+    assert [(r.network, r.postprocessing) for r in rows] == [("U-Net", "no"), ("U-Net", "yes"), ("FCN", "no"), ("FCN", "yes")]
+    assert shifted_post.iou < perfect_post.iou
+    assert perfect.iou == perfect.accuracy == perfect.recall == perfect.precision == perfect.mean_image_iou == 1.0
+    predicted = made["fcn-none"] > 0.5
+    tp, fp, fn = (predicted & labels).sum(), (predicted & ~labels).sum(), (~predicted & labels).sum()
+    assert shifted.iou == pytest.approx(tp / (tp + fp + fn)) and shifted.recall == pytest.approx(tp / (tp + fn))
+    assert shifted.accuracy == pytest.approx(1 - (fp + fn) / labels.size)
+    # The blur widens a perfect path a little (its edges pass 0.5 further out): IoU falls, but not far.
+    assert 0.8 < perfect_post.iou < 1.0 and perfect_post.recall > 0.95
+
+
+def test_outputs_follow_the_contract(scored, tmp_path):
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert set(metrics) == {"unet-none", "fcn-none", "baselines"} and metrics["unet-none"]["raw"]["iou"] == 1.0
+    assert any(name.startswith("mean path prior") for name in metrics["baselines"])
+    assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 | 1.000 |" in (tmp_path / "evaluation" / "results.md").read_text()
+    assert len((tmp_path / "evaluation" / "results.csv").read_text().splitlines()) == 5
+    curve = np.loadtxt(tmp_path / "pr" / "unet-none.csv", delimiter=",", skiprows=1)
+    assert curve.shape == (101, 3) and np.allclose(curve[1:-1, 1:], 1.0)  # perfect at every threshold inside (0, 1)
+    assert sorted(p.name for p in (tmp_path / "evaluation" / "figures").iterdir()) == ["good_and_bad_cases.png", "postprocessing.png"]
+    raw = read_predictions_manifest(tmp_path / "runs" / "unet-none" / "predictions" / "manifest.csv")
+    post = read_predictions_manifest(tmp_path / "post" / "unet-none" / "manifest.csv")
+    assert [s for s, _ in post] == [s for s, _ in raw]
+    for (_, a), (_, b) in zip(raw, post, strict=True):
+        before, after = np.load(a), np.load(b)
+        assert after.dtype == np.float16 and after.shape == before.shape and Path(b).parent.parent == tmp_path / "post" / "unet-none"
+    with sqlite3.connect(tmp_path / "mlflow.db") as db:
+        (value,) = db.execute("select value from metrics where key = 'unet-none.raw.iou'").fetchone()
+    assert value == 1.0
+
+
+def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path):
+    cli = [sys.executable, "-m", "offroad_path.evaluate", f"split.out_dir={split_dir}", f"evaluate.runs_dir={tmp_path / 'runs'}",
+           "evaluate.runs=[segnet-none]", f"evaluate.out_dir={tmp_path / 'evaluation'}", f"evaluate.metrics_path={tmp_path / 'm.json'}",
+           f"evaluate.plots_dir={tmp_path / 'pr'}", "mlflow.enabled=false"]  # fmt: skip
+    run = subprocess.run(cli, capture_output=True, text=True)
+    assert run.returncode == 2
+    manifest = tmp_path / "runs" / "segnet-none" / "predictions" / "manifest.csv"
+    assert run.stderr.strip().splitlines()[-1] == f"error: {manifest}: manifest is missing (run the train stage first)"
+    assert not any(tmp_path.iterdir())
