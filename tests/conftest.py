@@ -61,3 +61,26 @@ def split_dir(compose_config, labelled_drive, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("split") / "split"
     split(compose_config(f"split.labels_dir={labelled_drive}", f"split.out_dir={out}", "split.block_m=4", "split.guard_m=3"))
     return out
+
+
+TINY_TRAINING = (
+    "model.width=0.125",
+    "data.width=64",
+    "data.height=48",
+    "data.batch_size=2",
+    "trainer.accelerator=cpu",
+    "train.sample_images=1",
+)
+
+
+@pytest.fixture(scope="session")
+def tiny_config(compose_config, split_dir) -> Callable[..., DictConfig]:
+    """Training config on `split_dir` with networks and inputs small enough for a test, writing under `out`."""
+
+    def _compose(out: Path, *overrides: str) -> DictConfig:
+        return compose_config(
+            *TINY_TRAINING, f"data.split_dir={split_dir}", f"train.out_dir={out / 'run'}", f"pretrain.out_dir={out / 'pretrain'}",
+            f"mlflow.tracking_uri=sqlite:///{out / 'mlflow.db'}", *overrides,
+        )  # fmt: skip
+
+    return _compose

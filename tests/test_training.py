@@ -17,19 +17,10 @@ from offroad_path.pretrain import pretrain
 from offroad_path.train import train
 from offroad_path.training.pretrained import from_imagenet_vgg, from_segmentation
 
-TINY = ("model.width=0.125", "data.width=64", "data.height=48", "data.batch_size=2", "trainer.accelerator=cpu", "train.sample_images=1")
-
-
-def tiny(compose_config, split_dir: Path, tmp_path: Path, *overrides: str):
-    return compose_config(
-        *TINY, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path / 'run'}", f"pretrain.out_dir={tmp_path / 'pretrain'}",
-        f"mlflow.tracking_uri=sqlite:///{tmp_path / 'mlflow.db'}", *overrides,
-    )  # fmt: skip
-
 
 @pytest.mark.parametrize("model", ["segnet", "fcn", "unet"])
-def test_fast_dev_run_trains_tests_and_writes_confidence_maps(compose_config, split_dir, tmp_path, model):
-    metrics = train(tiny(compose_config, split_dir, tmp_path, f"model={model}", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
+def test_fast_dev_run_trains_tests_and_writes_confidence_maps(compose_config, split_dir, tmp_path, model, tiny_config):
+    metrics = train(tiny_config(tmp_path, f"model={model}", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
     assert 0.0 <= metrics["test/iou"] <= 1.0
     predictions = sorted((tmp_path / "run" / "predictions").rglob("*.npy"))
     test_rows = (split_dir / "test.csv").read_text().splitlines()[1:]
@@ -39,8 +30,8 @@ def test_fast_dev_run_trains_tests_and_writes_confidence_maps(compose_config, sp
     assert confidence.min() >= 0.0 and confidence.max() <= 1.0
 
 
-def test_pretrain_then_fine_tune_from_it(compose_config, split_dir, tmp_path):
-    cfg = tiny(compose_config, split_dir, tmp_path, "model=unet", "trainer.max_epochs=1", "mlflow.enabled=false")
+def test_pretrain_then_fine_tune_from_it(compose_config, split_dir, tmp_path, tiny_config):
+    cfg = tiny_config(tmp_path, "model=unet", "trainer.max_epochs=1", "mlflow.enabled=false")
     assert pretrain(cfg)["best_val_iou"] is not None
     checkpoint = tmp_path / "pretrain" / "checkpoints" / "best.ckpt"
     saved = {k.removeprefix("model."): v for k, v in torch.load(checkpoint, weights_only=False)["state_dict"].items()}
@@ -50,16 +41,16 @@ def test_pretrain_then_fine_tune_from_it(compose_config, split_dir, tmp_path):
     for name in loaded:
         assert torch.equal(model.state_dict()[name], saved[name])
     assert model.classifier.out_channels == 2
-    fine = train(tiny(compose_config, split_dir, tmp_path, "model=unet", "pretraining=segmentation", f"pretraining.checkpoint={checkpoint}",
+    fine = train(tiny_config(tmp_path, "model=unet", "pretraining=segmentation", f"pretraining.checkpoint={checkpoint}",
                       "trainer.fast_dev_run=true", "mlflow.enabled=false"))  # fmt: skip
     assert "test/iou" in fine
     with pytest.raises(ValueError, match=r"holds a unet of width 0\.125, not the segnet"):
         from_segmentation(build_model("segnet", 2, 0.125), checkpoint, "segnet", 0.125)
 
 
-def test_resume_continues_the_step_count_and_mlflow_has_the_run(compose_config, split_dir, tmp_path):
-    first = train(tiny(compose_config, split_dir, tmp_path, "model=fcn", "trainer.max_epochs=1"))
-    second = train(tiny(compose_config, split_dir, tmp_path, "model=fcn", "trainer.max_epochs=2"))
+def test_resume_continues_the_step_count_and_mlflow_has_the_run(compose_config, split_dir, tmp_path, tiny_config):
+    first = train(tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1"))
+    second = train(tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=2"))
     assert first["global_step"] > 0 and second["global_step"] == 2 * first["global_step"]
     with sqlite3.connect(tmp_path / "mlflow.db") as db:
         runs = db.execute("select run_uuid, name from runs").fetchall()
@@ -71,10 +62,10 @@ def test_resume_continues_the_step_count_and_mlflow_has_the_run(compose_config, 
     assert {"samples/epoch_000.png", "checkpoints/best.ckpt", "metrics.json"} <= stored
 
 
-def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path):
+def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path, tiny_overrides):
     db = tmp_path / "mlflow.db"
-    overrides = [*TINY, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path}/runs/${{model.name}}", "trainer.fast_dev_run=true",
-                 f"mlflow.tracking_uri=sqlite:///{db}", f"hydra.sweep.dir={tmp_path / 'sweep'}"]  # fmt: skip
+    overrides = [*tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path}/runs/${{model.name}}",
+                 "trainer.fast_dev_run=true", f"mlflow.tracking_uri=sqlite:///{db}", f"hydra.sweep.dir={tmp_path / 'sweep'}"]  # fmt: skip
     run = subprocess.run(
         [sys.executable, "-m", "offroad_path.train", "-m", "model=unet,fcn", *overrides], capture_output=True, text=True, cwd=tmp_path
     )
@@ -138,18 +129,15 @@ def test_imagenet_errors_name_the_file(tmp_path):
         from_imagenet_vgg(build_model("unet", 2, 0.125), tmp_path / "vgg16.pth")
 
 
-def test_unknown_choices_list_the_valid_ones(compose_config, split_dir, tmp_path):
+def test_unknown_choices_list_the_valid_ones(compose_config, split_dir, tmp_path, tiny_config):
     from hydra.errors import ConfigCompositionException
 
     with pytest.raises(ConfigCompositionException, match="model"):
         compose_config("model=deeplab")
     with pytest.raises(ValueError, match="valid: none, segmentation, imagenet"):
-        train(tiny(compose_config, split_dir, tmp_path, "pretraining.name=places365", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
+        train(tiny_config(tmp_path, "pretraining.name=places365", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
 
 
-def test_same_seed_same_metrics(compose_config, split_dir, tmp_path):
-    runs = [
-        train(tiny(compose_config, split_dir, tmp_path / str(i), "model=segnet", "trainer.max_epochs=1", "mlflow.enabled=false"))
-        for i in range(2)
-    ]
+def test_same_seed_same_metrics(compose_config, split_dir, tmp_path, tiny_config):
+    runs = [train(tiny_config(tmp_path / str(i), "model=segnet", "trainer.max_epochs=1", "mlflow.enabled=false")) for i in range(2)]
     assert runs[0] == runs[1]

@@ -268,7 +268,7 @@ class ExportConfig:
 
     checkpoint: str = "${train.out_dir}/checkpoints/best.ckpt"
     out: str = "${train.out_dir}/model.onnx"
-    opset: int = 17
+    opset: int = 18
     tolerance: float = 1e-4  # max abs difference of the path confidence against PyTorch
 
 

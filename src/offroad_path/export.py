@@ -1,0 +1,49 @@
+"""Export a trained path model to ONNX, and check it against PyTorch (see offroad_path.inference.export).
+
+    python -m offroad_path.export model=segnet pretraining=none
+    python -m offroad_path.export export.checkpoint=path/to/best.ckpt export.out=segnet.onnx
+
+The ONNX graph takes a normalised RGB batch (N, 3, h, w) at the network's training input size
+and returns the path confidence (N, h, w); `predict` runs it with onnxruntime.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from offroad_path.inference.export import export_onnx
+from offroad_path.inference.runners import TorchModel
+from offroad_path.utils.cli import hydra_stage
+
+log = logging.getLogger("offroad_path.export")
+
+
+def run_export(cfg: DictConfig) -> float:
+    e = cfg.export
+    model = TorchModel(e.checkpoint)
+    out = Path(e.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.tmp-", suffix=".onnx", dir=out.parent)
+    os.close(fd)
+    try:
+        difference = export_onnx(model.task.model, model.width, model.height, Path(tmp), e.opset)
+        if difference > e.tolerance:
+            raise ValueError(f"{e.checkpoint}: the ONNX export differs from PyTorch by {difference:.2e} (> {e.tolerance:g})")
+        os.replace(tmp, out)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    log.info("exported %s to %s (%d x %d input, dynamic batch); largest difference from PyTorch %.2e", e.checkpoint, out,
+             model.width, model.height, difference)  # fmt: skip
+    return difference
+
+
+main = hydra_stage(run_export)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,85 @@
+"""A trained path model as a function from RGB images to path confidence: PyTorch checkpoints
+and exported ONNX files, with the training pipeline's own preprocessing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from offroad_path.data.dataset import transforms
+
+
+class PathModel:
+    """Base: resize and normalise as in training, run, resize the confidence back to each image."""
+
+    width: int
+    height: int
+
+    def __call__(self, images: list[np.ndarray]) -> list[np.ndarray]:
+        """RGB (H, W, 3) uint8 images -> path confidence (H, W) float32 in [0, 1], one per image."""
+        prepare = transforms(self.width, self.height, augment=False)
+        batch = torch.stack([prepare(image=image)["image"] for image in images])  # (N, 3, h, w)
+        confidence = self.run(batch)  # (N, h, w)
+        return [cv2.resize(c, (im.shape[1], im.shape[0]), interpolation=cv2.INTER_LINEAR) for c, im in zip(confidence, images, strict=True)]
+
+    def run(self, batch: torch.Tensor) -> np.ndarray:
+        raise NotImplementedError
+
+
+class TorchModel(PathModel):
+    def __init__(self, checkpoint: str | Path, device: str = "cpu"):
+        from offroad_path.training.task import SegmentationTask
+
+        checkpoint = Path(checkpoint)
+        if not checkpoint.is_file():
+            raise FileNotFoundError(f"{checkpoint}: no such checkpoint")
+        saved = torch.load(checkpoint, map_location="cpu", weights_only=False)
+        data = saved.get("datamodule_hyper_parameters") or {}
+        if "width" not in data or "height" not in data or saved.get("hyper_parameters", {}).get("num_classes") != 2:
+            raise ValueError(f"{checkpoint}: not a path model checkpoint of the train stage (no 2-class head or input size)")
+        self.width, self.height = int(data["width"]), int(data["height"])
+        self.task = SegmentationTask.load_from_checkpoint(checkpoint, map_location=device).eval()
+        self.device = device
+
+    def run(self, batch: torch.Tensor) -> np.ndarray:
+        with torch.no_grad():
+            return self.task(batch.to(self.device)).softmax(1)[:, 1].float().cpu().numpy()
+
+
+class OnnxModel(PathModel):
+    def __init__(self, path: str | Path):
+        import onnxruntime as ort
+
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such ONNX file")
+        try:
+            self.session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime raises its own exception types
+            raise ValueError(f"{path}: not a loadable ONNX model ({e})") from e
+        shape = self.session.get_inputs()[0].shape  # [batch, 3, h, w]
+        self.height, self.width = int(shape[2]), int(shape[3])
+
+    def run(self, batch: torch.Tensor) -> np.ndarray:
+        return self.session.run(None, {self.session.get_inputs()[0].name: batch.numpy()})[0]
+
+
+def mlflow_checkpoint(run_id: str, tracking_uri: str) -> Path:
+    """The best checkpoint a training run logged (artifact checkpoints/best.ckpt), downloaded."""
+    import mlflow
+
+    try:
+        return Path(mlflow.artifacts.download_artifacts(run_id=run_id, artifact_path="checkpoints/best.ckpt", tracking_uri=tracking_uri))
+    except Exception as e:  # MLflow raises its own exception types
+        raise ValueError(f"MLflow run {run_id} at {tracking_uri}: no checkpoints/best.ckpt artifact ({e})") from e
+
+
+def load_model(checkpoint: str | None, run_id: str | None, tracking_uri: str, device: str = "cpu") -> PathModel:
+    if run_id:
+        return TorchModel(mlflow_checkpoint(run_id, tracking_uri), device)
+    if not checkpoint:
+        raise ValueError("give predict.checkpoint (a .ckpt or .onnx file) or predict.run_id (an MLflow training run)")
+    return OnnxModel(checkpoint) if str(checkpoint).endswith(".onnx") else TorchModel(checkpoint, device)

@@ -1,0 +1,104 @@
+"""Where predict's frames come from: a folder of images, a stereo sequence, or a video file."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from offroad_path.labelling.disparity import compute_disparity, depth_from_disparity, sgbm
+from offroad_path.sequence.reader import open_sequence
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
+
+
+@dataclass
+class Frame:
+    name: str  # output file stem
+    image: np.ndarray  # RGB (H, W, 3) uint8
+    depth: np.ndarray | None = None  # metres (H, W), 0 unknown; stereo sequences only
+
+
+@dataclass
+class FrameSource:
+    kind: str  # folder | sequence | video
+    path: Path
+    count: int
+    fps: float | None
+    frames: Iterator[Frame]
+
+
+def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = None) -> FrameSource:
+    """Frames of `path`; stereo depth (StereoSGBM with disparity_cfg) for sequences when given a config."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such folder or video file")
+    if path.is_dir() and (path / "calib.txt").is_file():
+        return _sequence(path, disparity_cfg, max_frames)
+    if path.is_dir():
+        return _folder(path, max_frames)
+    return _video(path, max_frames)
+
+
+def _limit(n: int, max_frames: int | None) -> int:
+    return n if max_frames is None else min(n, max_frames)
+
+
+def _folder(path: Path, max_frames: int | None) -> FrameSource:
+    files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    files = files[: _limit(len(files), max_frames)]
+    if not files:
+        raise ValueError(f"{path}: holds no images ({', '.join(IMAGE_SUFFIXES)})")
+
+    def frames() -> Iterator[Frame]:
+        for file in files:
+            image = cv2.imread(str(file), cv2.IMREAD_COLOR)
+            if image is None:
+                raise ValueError(f"{file}: cannot be decoded as an image")
+            yield Frame(file.stem, cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
+
+    return FrameSource("folder", path, len(files), None, frames())
+
+
+def _sequence(path: Path, disparity_cfg, max_frames: int | None) -> FrameSource:
+    seq = open_sequence(path)  # validates calibration, pairs, sizes
+    n = _limit(len(seq), max_frames)
+    fps = None
+    if seq.times is not None and len(seq.times) > 1 and np.median(np.diff(seq.times)) > 0:
+        fps = float(1.0 / np.median(np.diff(seq.times)))
+    matcher = sgbm(disparity_cfg) if disparity_cfg is not None else None
+
+    def frames() -> Iterator[Frame]:
+        for i in range(n):
+            depth = None
+            if matcher is not None:
+                disparity = compute_disparity(matcher, seq.load_left(i, grey=True), seq.load_right(i, grey=True))
+                depth = depth_from_disparity(disparity, seq.calibration.fx, seq.calibration.baseline_m)
+            yield Frame(f"{i:06d}", seq.load_left(i), depth)
+
+    return FrameSource("sequence", path, n, fps, frames())
+
+
+def _video(path: Path, max_frames: int | None) -> FrameSource:
+    capture = cv2.VideoCapture(str(path))
+    ok, first = capture.read() if capture.isOpened() else (False, None)
+    if not ok:
+        capture.release()
+        raise ValueError(f"{path}: not a readable video (OpenCV could not decode a frame)")
+    fps = capture.get(cv2.CAP_PROP_FPS) or None
+    count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) or 1  # a container's count; decoding may find fewer
+
+    def frames() -> Iterator[Frame]:
+        image, i = first, 0
+        try:
+            while image is not None and (max_frames is None or i < max_frames):
+                yield Frame(f"{i:06d}", cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
+                ok, image = capture.read()
+                image, i = (image if ok else None), i + 1
+        finally:
+            capture.release()
+
+    return FrameSource("video", path, _limit(count, max_frames), fps, frames())

@@ -1,0 +1,74 @@
+"""Run a trained path model on new footage: a folder of images, a stereo sequence, or a video.
+
+    python -m offroad_path.predict predict.checkpoint=data/runs/unet-none/checkpoints/best.ckpt predict.input=drive.mp4
+    python -m offroad_path.predict predict.run_id=<MLflow training run> predict.input=data/synthetic/seq_001 predict.postprocess=true
+    python -m offroad_path.predict predict.checkpoint=data/runs/segnet-none/model.onnx predict.input=images/
+
+Writes predict.out_dir: confidence/NAME.png (path confidence, 0-255), overlay/NAME.png (the
+path, C > predict.threshold, tinted over the image) and, for a video or a sequence, overlay.mp4.
+Post-processing uses the stereo depth mask only where the input is a stereo sequence.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import cv2
+import numpy as np
+from omegaconf import DictConfig
+from tqdm import tqdm
+
+from offroad_path.inference.overlay import tint
+from offroad_path.inference.runners import load_model
+from offroad_path.inference.sources import open_source
+from offroad_path.postprocessing import PostprocessParams, postprocess
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.cli import hydra_stage
+from offroad_path.utils.tracking import tracking_uri
+
+log = logging.getLogger("offroad_path.predict")
+DEFAULT_FPS = 10.0
+
+
+def run_predict(cfg: DictConfig) -> dict:
+    p, pp = cfg.predict, cfg.postprocess
+    model = load_model(p.checkpoint, p.run_id, tracking_uri(cfg.mlflow), p.device)
+    source = open_source(p.input, cfg.label.disparity if p.postprocess else None, p.max_frames)
+    fps = p.video_fps or source.fps or DEFAULT_FPS
+    frames, model_seconds, start = 0, 0.0, time.perf_counter()
+    with atomic_directory(p.out_dir) as tmp:
+        (tmp / "confidence").mkdir()
+        (tmp / "overlay").mkdir()
+        video = None
+        for frame in tqdm(source.frames, total=source.count, unit="frame", desc=f"predict {source.kind}"):
+            t0 = time.perf_counter()
+            (confidence,) = model([frame.image])
+            model_seconds += time.perf_counter() - t0
+            if p.postprocess:
+                params = PostprocessParams(pp.max_depth_m, pp.sigma, pp.delta, use_depth=frame.depth is not None)
+                confidence = postprocess(confidence, frame.depth, params)
+            shown = tint(frame.image, confidence > p.threshold)
+            cv2.imwrite(str(tmp / "confidence" / f"{frame.name}.png"), np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
+            cv2.imwrite(str(tmp / "overlay" / f"{frame.name}.png"), cv2.cvtColor(shown, cv2.COLOR_RGB2BGR))
+            if source.kind != "folder":
+                if video is None:
+                    video = cv2.VideoWriter(str(tmp / "overlay.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), fps, shown.shape[1::-1])
+                    if not video.isOpened():
+                        raise ValueError(f"{tmp / 'overlay.mp4'}: OpenCV cannot write an MP4 here")
+                video.write(cv2.cvtColor(shown, cv2.COLOR_RGB2BGR))
+            frames += 1
+        if video is not None:
+            video.release()
+    seconds = time.perf_counter() - start
+    summary = {"frames": frames, "seconds": seconds, "fps": frames / seconds, "model_fps": frames / max(model_seconds, 1e-9)}
+    print(f"{frames} frames in {seconds:.1f} s: {summary['fps']:.1f} frames/s end to end, {summary['model_fps']:.1f} frames/s "
+          f"in the model ({type(model).__name__}, {model.width} x {model.height}); written to {p.out_dir}")  # fmt: skip
+    return summary
+
+
+main = hydra_stage(run_predict)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,59 @@
+"""Steering frames as tensors: the image resized to PilotNet's input, mirrored with its angle."""
+
+from __future__ import annotations
+
+import albumentations as A
+import cv2
+import lightning as L
+import numpy as np
+import torch
+from albumentations.pytorch import ToTensorV2
+from torch.utils.data import DataLoader, Dataset
+
+from offroad_path.data.dataset import read
+from offroad_path.steering.frames import SteeringFrame
+
+
+def steering_transforms(width: int, height: int, jitter: float, seed: int) -> A.Compose:
+    """Resize and normalise; photometric jitter only, since a crop or a shift would change the angle."""
+    ops: list = [A.Resize(height, width)]
+    if jitter > 0:
+        ops.append(A.ColorJitter(brightness=jitter, contrast=jitter, saturation=jitter, hue=0.02))
+    return A.Compose([*ops, A.Normalize(), ToTensorV2()], seed=seed)
+
+
+class SteeringDataset(Dataset):
+    def __init__(self, frames: list[SteeringFrame], transform: A.Compose):
+        self.frames = frames
+        self.transform = transform
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, i: int) -> dict:
+        frame = self.frames[i]
+        image = cv2.cvtColor(read(frame.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        if frame.mirrored:
+            image = np.ascontiguousarray(image[:, ::-1])
+        return {"image": self.transform(image=image)["image"], "steering": torch.tensor(frame.steering, dtype=torch.float32)}
+
+
+class SteeringDataModule(L.LightningDataModule):
+    def __init__(self, parts: dict[str, list[SteeringFrame]], width: int, height: int, batch_size: int, jitter: float, seed: int):
+        super().__init__()
+        self.parts = parts
+        self.width, self.height, self.batch_size, self.jitter, self.seed = width, height, batch_size, jitter, seed
+
+    def _loader(self, part: str, train: bool) -> DataLoader:
+        transform = steering_transforms(self.width, self.height, self.jitter if train else 0.0, self.seed)
+        generator = torch.Generator().manual_seed(self.seed)
+        return DataLoader(SteeringDataset(self.parts[part], transform), self.batch_size, shuffle=train, generator=generator)
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader("train", train=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader("val", train=False)
+
+    def test_dataloader(self) -> DataLoader:
+        return self._loader("test", train=False)

@@ -1,0 +1,56 @@
+"""Scoring the steering baseline as the thesis did (section 5.1.2): mean absolute error of the
+normalised angle, its spread over the true angle's magnitude, the largest predicted magnitude,
+and predicted against true angle as a scatter plot (the thesis's Fig. 5.4)."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+
+MAGNITUDE_EDGES = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 1.0)
+
+
+def steering_metrics(true: np.ndarray, predicted: np.ndarray) -> dict:
+    error = np.abs(predicted - true)
+    return {
+        "test_frames": len(true),
+        "mean_absolute_error": float(error.mean()),
+        "largest_predicted_magnitude": float(np.abs(predicted).max()),
+        "largest_true_magnitude": float(np.abs(true).max()),
+        # what always predicting straight ahead would score: the bias the thesis saw
+        "straight_ahead_mean_absolute_error": float(np.abs(true).mean()),
+    }
+
+
+def error_by_magnitude(true: np.ndarray, predicted: np.ndarray, edges: tuple[float, ...] = MAGNITUDE_EDGES) -> list[dict]:
+    """Mean absolute error and mean predicted magnitude per bin of true magnitude [lo, hi)."""
+    rows = []
+    magnitude = np.abs(true)
+    for lo, hi in itertools.pairwise(edges):
+        inside = (magnitude >= lo) & ((magnitude < hi) | (hi == edges[-1]))
+        rows.append({
+            "true_magnitude": f"{lo:.1f}-{hi:.1f}", "frames": int(inside.sum()),
+            "mean_absolute_error": float(np.abs(predicted - true)[inside].mean()) if inside.any() else None,
+            "mean_predicted_magnitude": float(np.abs(predicted)[inside].mean()) if inside.any() else None,
+        })  # fmt: skip
+    return rows
+
+
+def scatter_plot(true: np.ndarray, predicted: np.ndarray, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(4.5, 4.5), dpi=120)
+    ax.scatter(true, predicted, s=6, alpha=0.5)
+    ax.plot([-1, 1], [-1, 1], color="grey", lw=0.8, label="perfect")
+    ax.axhspan(-0.5, 0.5, color="orange", alpha=0.08, label="|prediction| <= 0.5")
+    ax.set(xlim=(-1, 1), ylim=(-1, 1), xlabel="true normalised steering", ylabel="predicted",
+           title=f"PilotNet, {len(true)} test frames, MAE {np.abs(predicted - true).mean():.3f}")  # fmt: skip
+    ax.legend(loc="upper left", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

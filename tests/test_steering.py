@@ -1,0 +1,73 @@
+"""The end-to-end steering baseline: PilotNet's shape, a split that follows the path split, the
+scores on hand-made angles, and the stage on a real rendered drive."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from offroad_path.data.manifest import read_manifest
+from offroad_path.sequence.reader import open_sequence
+from offroad_path.steering.evaluation import error_by_magnitude, steering_metrics
+from offroad_path.steering.frames import steering_split, travelled
+from offroad_path.steering.pilotnet import PilotNet, feature_size
+from offroad_path.train_steering import train_steering
+
+
+def test_pilotnet_parameters_and_output():
+    net = PilotNet(256, 136)
+    # convolutions: 1824 + 21636 + 43248 + 27712 + 36928; fully connected from 64 x 10 x 25 features:
+    # 16000 * 100 + 100, 100 * 50 + 50, 50 * 10 + 10, 10 + 1
+    assert feature_size(256, 136) == (10, 25)
+    assert sum(p.numel() for p in net.parameters()) == 131_348 + 1_600_100 + 5_050 + 510 + 11
+    out = net(torch.randn(3, 3, 136, 256) * 50)  # large inputs: the output still stays in [-1, 1]
+    assert out.shape == (3,) and out.abs().max() <= 1
+    with pytest.raises(ValueError, match="too small"):
+        PilotNet(40, 30)
+
+
+def test_scores_on_hand_made_angles():
+    true = np.array([0.0, 0.05, -0.3, 0.8])
+    predicted = np.array([0.1, 0.05, -0.1, 0.4])
+    m = steering_metrics(true, predicted)
+    assert m["mean_absolute_error"] == pytest.approx((0.1 + 0 + 0.2 + 0.4) / 4)
+    assert m["largest_predicted_magnitude"] == pytest.approx(0.4) and m["straight_ahead_mean_absolute_error"] == pytest.approx(1.15 / 4)
+    bins = {b["true_magnitude"]: b for b in error_by_magnitude(true, predicted)}
+    assert bins["0.0-0.1"]["frames"] == 2 and bins["0.0-0.1"]["mean_absolute_error"] == pytest.approx(0.05)
+    assert bins["0.3-0.4"]["mean_absolute_error"] == pytest.approx(0.2)
+    assert bins["0.5-1.0"]["mean_predicted_magnitude"] == pytest.approx(0.4)
+    assert bins["0.1-0.2"]["frames"] == 0 and bins["0.1-0.2"]["mean_absolute_error"] is None
+
+
+def test_split_follows_the_path_split(compose_config, labelled_drive, split_dir):
+    cfg = compose_config("split.block_m=4", "split.guard_m=3")
+    parts = steering_split(labelled_drive, split_dir, cfg.split.block_m, cfg.split.guard_m, mirror=True)
+    seq = open_sequence(json.loads((labelled_drive / "summary.json").read_text())["sequences"][0]["root"])
+    at = travelled(np.loadtxt(labelled_drive / "drive" / "poses_vo.txt").reshape(-1, 3, 4))
+    for part in ("val", "test"):
+        # every held-out labelled frame of the path split is held out here too, in the same part
+        held = {s.f0 for s in read_manifest(split_dir / f"{part}.csv")}
+        assert held <= {f.frame for f in parts[part]}
+    train_at = at[[f.frame for f in parts["train"]]]
+    held_at = at[[f.frame for f in parts["val"] + parts["test"]]]
+    assert np.abs(train_at[:, None] - held_at[None, :]).min() >= 3.0
+    # mirrored copies sit beside their frame with the angle negated, and angles come from steering.txt
+    for a, b in zip(parts["test"][::2], parts["test"][1::2], strict=True):
+        assert (a.frame, a.mirrored, b.mirrored) == (b.frame, False, True) and b.steering == -a.steering
+        assert a.steering == pytest.approx(seq.steering[a.frame])
+
+
+def test_stage_fast_dev_run_writes_its_outputs(compose_config, labelled_drive, split_dir, tmp_path):
+    cfg = compose_config(f"steering.labels_dir={labelled_drive}", f"steering.split_dir={split_dir}", "split.block_m=4", "split.guard_m=3",
+                         f"steering.out_dir={tmp_path / 'steering'}", f"steering.metrics_path={tmp_path / 'steering.json'}",
+                         f"steering.plots_path={tmp_path / 'scatter.csv'}", "trainer.fast_dev_run=true",
+                         "mlflow.enabled=false")  # fmt: skip
+    metrics = train_steering(cfg)
+    assert json.loads((tmp_path / "steering.json").read_text()) == pytest.approx(metrics)
+    rows = (tmp_path / "scatter.csv").read_text().splitlines()
+    assert rows[0] == "true,predicted" and len(rows) - 1 == metrics["test_frames"]
+    for name in ("predictions.csv", "error_by_magnitude.csv", "metrics.json", "scatter.png"):
+        assert (tmp_path / "steering" / name).is_file()
