@@ -46,6 +46,7 @@ def repo_copy(tmp_path) -> Path:
     preset["model"]["width"] = 0.125
     preset["trainer"]["max_epochs"] = 1
     preset["pretrain"]["max_epochs"] = 1
+    preset["steering"] = {"max_epochs": 1}
     laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
     (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
     subprocess.run([sys.executable, "-m", "dvc", "init", "--no-scm", "-q"], cwd=repo, check=True)
@@ -56,7 +57,7 @@ def repo_copy(tmp_path) -> Path:
 def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     out = dvc(repo_copy, "repro")
     ran = set(re.findall(r"Running stage '([^']+)'", out))
-    stages = {"synthesize", "label", "split", "evaluate"} | {
+    stages = {"synthesize", "label", "split", "evaluate", "train_steering"} | {
         f"{s}@{m}" for s in ("pretrain", "train_scratch", "train_pretrained") for m in MODELS
     }
     stages |= {f"postprocess@{m}-{p}" for m in MODELS for p in ("none", "segmentation")}
@@ -75,6 +76,8 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     assert len((repo_copy / "data" / "evaluation" / "results.csv").read_text().splitlines()) == 1 + 12
     assert len(list((repo_copy / "metrics" / "precision_recall").glob("*.csv"))) == 6
     assert {p.name for p in (repo_copy / "data" / "evaluation" / "figures").iterdir()} == {"good_and_bad_cases.png", "postprocessing.png"}
+    steering = json.loads((repo_copy / "metrics" / "steering.json").read_text())
+    assert steering["test_frames"] > 0 and 0 <= steering["mean_absolute_error"] <= 2
     assert "segnet-none" in dvc(repo_copy, "metrics", "show")
     assert "Data and pipelines are up to date" in dvc(repo_copy, "repro")
     # A U-Net setting reruns the U-Net stages and nothing else.

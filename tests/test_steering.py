@@ -68,6 +68,6 @@ def test_stage_fast_dev_run_writes_its_outputs(compose_config, labelled_drive, s
     metrics = train_steering(cfg)
     assert json.loads((tmp_path / "steering.json").read_text()) == pytest.approx(metrics)
     rows = (tmp_path / "scatter.csv").read_text().splitlines()
-    assert rows[0] == "true,predicted" and len(rows) - 1 == metrics["test_frames"]
+    assert rows[0] == "truth,prediction" and len(rows) - 1 == metrics["test_frames"]
     for name in ("predictions.csv", "error_by_magnitude.csv", "metrics.json", "scatter.png"):
         assert (tmp_path / "steering" / name).is_file()

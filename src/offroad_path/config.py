@@ -176,6 +176,8 @@ class TrainerConfig:
     max_epochs: int = 100
     accelerator: str = "auto"
     devices: str = "auto"
+    strategy: str = "auto"  # ddp across GPUs (trainer=ddp)
+    num_nodes: int = 1
     precision: str = "32-true"
     channels_last: bool = False
     deterministic: bool = False

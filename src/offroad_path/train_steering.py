@@ -67,7 +67,8 @@ def train_steering(cfg: DictConfig) -> dict:
     with atomic_directory(out_dir) as tmp:
         best = ModelCheckpoint(dirpath=tmp / "checkpoints", filename="best", monitor="val/mae", mode="min")
         trainer = L.Trainer(
-            max_epochs=s.max_epochs, accelerator=t.accelerator, devices=t.devices, precision=t.precision, deterministic=t.deterministic,
+            max_epochs=s.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
+            precision=t.precision, deterministic=t.deterministic,
             log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run, logger=logger if logger is not None else False,
             callbacks=[best, EarlyStopping("val/mae", mode="min", patience=s.patience)], default_root_dir=tmp, enable_progress_bar=False,
         )  # fmt: skip
@@ -91,9 +92,9 @@ def train_steering(cfg: DictConfig) -> dict:
         (tmp / "metrics.json").write_text(json.dumps({**metrics, "by_true_magnitude": bins}, indent=2) + "\n")
         scatter_plot(true, predicted, tmp / "scatter.png")
     write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n")
-    write_text_atomic(s.plots_path, "true,predicted\n" + "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True)))
+    write_text_atomic(s.plots_path, "truth,prediction\n" + "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True)))
     if logger is not None:
-        logger.experiment.log_metrics(logger.run_id, {f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
+        logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
         for name in ("scatter.png", "error_by_magnitude.csv", "metrics.json"):
             logger.experiment.log_artifact(logger.run_id, str(out_dir / name))
     log.info("PilotNet: test mean absolute error %.4f (straight ahead would score %.4f), largest predicted magnitude %.3f of true %.3f",

@@ -41,6 +41,13 @@ class PilotNet(nn.Module):
             head += [nn.Linear(a, b), nn.ReLU(inplace=True)]
         head += [nn.Linear(sizes[-1], 1)]
         self.head = nn.Sequential(*head)
+        # He initialisation: with PyTorch's default (a third of He's variance per layer) the signal
+        # fades through the eight layers to an output that hardly depends on the image, and SGD
+        # settles on a constant.
+        for m in self.modules():
+            if isinstance(m, nn.Conv2d | nn.Linear):
+                nn.init.kaiming_normal_(m.weight, nonlinearity="relu")
+                nn.init.zeros_(m.bias)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:  # (N, 3, H, W) -> steering (N,) in [-1, 1]
         return torch.tanh(self.head(self.features(image))[:, 0])

@@ -89,8 +89,8 @@ def fit(
     best = ModelCheckpoint(dirpath=checkpoints, filename="best", monitor="val/iou", mode="max", save_last=True)
     logger = mlflow_logger(cfg, stage)
     trainer = L.Trainer(
-        max_epochs=t.max_epochs, accelerator=t.accelerator, devices=t.devices, precision=t.precision,
-        deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
+        max_epochs=t.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
+        precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
         callbacks=[best, EarlyStopping("val/iou", mode="max", patience=t.patience), LogSamples(cfg.train.sample_images)],
         logger=logger if logger is not None else False, default_root_dir=out_dir, enable_progress_bar=False,
     )  # fmt: skip
