@@ -9,6 +9,7 @@ import torch.nn.functional as F
 from torchmetrics import MeanAbsoluteError
 
 from offroad_path.steering.pilotnet import PilotNet
+from offroad_path.training.task import sgd_with_step_decay
 
 
 class SteeringTask(L.LightningModule):
@@ -47,9 +48,4 @@ class SteeringTask(L.LightningModule):
         self._step(batch, "test")
 
     def configure_optimizers(self):
-        hp = self.hparams
-        optimizer = torch.optim.SGD(self.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
-        if hp.lr_step_epochs <= 0:
-            return optimizer
-        scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+        return sgd_with_step_decay(self)

@@ -79,9 +79,15 @@ class SegmentationTask(L.LightningModule):
         self._step(batch, self.test_metrics, "test")
 
     def configure_optimizers(self):
-        hp = self.hparams
-        optimizer = torch.optim.SGD(self.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
-        if hp.lr_step_epochs <= 0:
-            return optimizer
-        scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
-        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+        return sgd_with_step_decay(self)
+
+
+def sgd_with_step_decay(task: L.LightningModule):
+    """SGD with momentum and weight decay, the lr multiplied by lr_gamma every lr_step_epochs (0: fixed),
+    from the task's hparams: how the paper trained every network."""
+    hp = task.hparams
+    optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
+    if hp.lr_step_epochs <= 0:
+        return optimizer
+    scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
+    return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
