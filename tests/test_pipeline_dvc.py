@@ -21,8 +21,16 @@ from offroad_path.sequence import find_sequences
 ROOT = Path(__file__).resolve().parents[1]
 
 
+GIT_IDENTITY = {"GIT_AUTHOR_NAME": "test", "GIT_AUTHOR_EMAIL": "test@example.com", "GIT_COMMITTER_NAME": "test",
+                "GIT_COMMITTER_EMAIL": "test@example.com"}  # fmt: skip
+
+
+def git(repo: Path, *args: str) -> None:
+    subprocess.run(["git", *args], cwd=repo, env={**os.environ, **GIT_IDENTITY}, check=True, capture_output=True)
+
+
 def dvc(repo: Path, *args: str) -> str:
-    env = dict(os.environ)
+    env = {**os.environ, **GIT_IDENTITY}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"  # `python` in dvc.yaml is this one
     env["PYTHONPATH"] = str(repo / "src")  # the copy's code, not the installed checkout's
     run = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=repo, env=env, capture_output=True, text=True)
@@ -49,7 +57,8 @@ def repo_copy(tmp_path) -> Path:
     preset["steering"] = {"max_epochs": 1}
     laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
     (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
-    subprocess.run([sys.executable, "-m", "dvc", "init", "--no-scm", "-q"], cwd=repo, check=True)
+    git(repo, "init", "-q")
+    subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
     return repo
 
 
@@ -91,3 +100,10 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
         "postprocess@unet-segmentation",
         "evaluate",
     }
+    # A DVC experiment that sets a value of a params file runs the same stages, and is listed.
+    git(repo_copy, "add", "-A")
+    git(repo_copy, "commit", "-q", "-m", "baseline")
+    ran = set(re.findall(r"Running stage '([^']+)'", dvc(repo_copy, "exp", "run", "-S", "conf/model/unet.yaml:laptop_lr=0.05")))
+    assert ran == {"pretrain@unet", "train_scratch@unet", "train_pretrained@unet", "postprocess@unet-none", "postprocess@unet-segmentation",
+                   "evaluate"}  # fmt: skip
+    assert "laptop_lr" in dvc(repo_copy, "exp", "show", "--md")

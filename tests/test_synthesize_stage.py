@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
+import time
 
 import cv2
 import numpy as np
@@ -82,3 +84,16 @@ def test_cli_refuses_a_misspelt_key_before_any_work(tmp_path):
     assert run.returncode != 0
     assert "hil_height_m" in run.stderr
     assert not out.exists()
+
+
+def test_a_stopped_stage_leaves_no_temporary_output(tmp_path):
+    out = tmp_path / "synthetic"
+    cli = [sys.executable, "-m", "offroad_path.synthesize", f"synthesize.out_dir={out}", "synthesize.sequences=2", "mlflow.enabled=false"]
+    stage = subprocess.Popen(cli, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob(".synthetic.tmp-*")) and time.monotonic() < deadline and stage.poll() is None:
+        time.sleep(0.2)
+    assert list(tmp_path.glob(".synthetic.tmp-*")), "the stage never started writing"
+    stage.send_signal(signal.SIGTERM)
+    assert stage.wait(timeout=60) == 128 + signal.SIGTERM
+    assert not any(tmp_path.iterdir())

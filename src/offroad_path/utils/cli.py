@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import signal
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -29,6 +30,10 @@ def clear_errors() -> Iterator[None]:
         raise SystemExit(EXIT_BAD_INPUT) from e
 
 
+def _stop(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
 CONF_DIR = Path(__file__).resolve().parents[3] / "conf"
 
 
@@ -41,6 +46,9 @@ def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
 
     @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
     def main(cfg: DictConfig) -> None:
+        # A stop (kill, `dvc` interrupted) unwinds like an error, so atomic outputs delete their
+        # temporary folders instead of leaving them beside the outputs.
+        signal.signal(signal.SIGTERM, _stop)
         with clear_errors():
             stage(cfg)
 
