@@ -74,6 +74,12 @@ TINY_TRAINING = (
 
 
 @pytest.fixture(scope="session")
+def tiny_overrides() -> tuple[str, ...]:
+    """Overrides that make training small enough for a test: narrow networks on 64 x 48 inputs."""
+    return TINY_TRAINING
+
+
+@pytest.fixture(scope="session")
 def tiny_config(compose_config, split_dir) -> Callable[..., DictConfig]:
     """Training config on `split_dir` with networks and inputs small enough for a test, writing under `out`."""
 
