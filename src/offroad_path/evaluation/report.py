@@ -1,0 +1,137 @@
+"""Every run scored with and without post-processing, and what the evaluate stage writes of it:
+the results table, the baselines, precision-recall curves, `metrics.json` and the figures."""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from omegaconf import DictConfig
+
+from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
+from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases, save_png
+from offroad_path.evaluation.metrics import Scores, counts, mean_path, non_corresponding, pooled, precision_recall_curve
+from offroad_path.evaluation.results import (
+    ResultRow,
+    baseline_table,
+    csv_text,
+    load_labels,
+    load_maps,
+    markdown_table,
+    network_name,
+    score,
+    split_run_name,
+)
+from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+
+log = logging.getLogger(__name__)
+POSTPROCESSING = ("no", "yes")
+
+
+@dataclass
+class Report:
+    runs: list[str]
+    samples: list[Sample] = field(default_factory=list)
+    rows: dict[tuple[str, str], ResultRow] = field(default_factory=dict)  # (run, post-processing) -> table row
+    per_image_iou: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
+    paths: dict[tuple[str, str], list[str]] = field(default_factory=dict)  # the maps behind each row
+    curves: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # run -> precision-recall curve
+    baselines: dict[str, Scores] = field(default_factory=dict)
+
+    def table(self) -> list[ResultRow]:
+        return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
+
+    def best_run(self, runs: list[str] | None = None) -> str:
+        return max(runs or self.runs, key=lambda run: self.rows[run, "no"].iou)
+
+    def metrics(self) -> dict:
+        """For metrics.json and MLflow: numbers only (rounded), None for undefined (JSON has no nan)."""
+        out: dict = {run: {"raw": _numbers(self.rows[run, "no"]), "postprocessed": _numbers(self.rows[run, "yes"])} for run in self.runs}
+        out["baselines"] = {name: _numbers(s) for name, s in self.baselines.items()}
+        return out
+
+
+def _numbers(row) -> dict:
+    return {k: (None if v != v else round(v, 6)) for k, v in asdict(row).items() if isinstance(v, float)}
+
+
+def baseline(predicted: np.ndarray, labels: np.ndarray, samples: list[Sample]) -> Scores:
+    """The non-corresponding baseline; undefined (nan) when the test set holds a single frame."""
+    groups = [(s.sequence, s.f0) for s in samples]
+    if len(set(groups)) < 2:
+        log.warning("the test set holds one frame: no non-corresponding baseline")
+        return Scores(*[float("nan")] * 4)
+    return non_corresponding(predicted, labels, groups)
+
+
+def score_runs(e: DictConfig) -> Report:
+    """Score each run's raw (train) and post-processed maps against the test labels, with the baselines."""
+    report = Report(list(e.runs))
+    labels = np.zeros(0)
+    for run in report.runs:
+        model, pretraining = split_run_name(run)
+        for pp, manifest, made_by in (("no", Path(e.runs_dir) / run / "predictions" / "manifest.csv", "train"),
+                                      ("yes", Path(e.postprocessed_dir) / run / "manifest.csv", "postprocess")):  # fmt: skip
+            rows = read_predictions_manifest(manifest, made_by)
+            if report.samples and [s for s, _ in rows] != report.samples:
+                raise ValueError(f"{manifest}: lists other test samples than the runs before it (retrain on the same split)")
+            report.samples, report.paths[run, pp] = [s for s, _ in rows], [p for _, p in rows]
+            if not len(labels):
+                labels = load_labels(report.samples)
+            maps = load_maps(report.paths[run, pp])
+            report.rows[run, pp], report.per_image_iou[run, pp] = score(network_name(model), pretraining, pp, maps, labels, e.threshold)
+            if pp == "no":
+                report.curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
+                name = f"{network_name(model)} ({pretraining}) against non-corresponding ground truth"
+                report.baselines[name] = baseline(maps > e.threshold, labels, report.samples)
+        log.info("%s: IoU %.3f, post-processed %.3f", run, report.rows[run, "no"].iou, report.rows[run, "yes"].iou)
+    prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
+    everywhere = np.broadcast_to(prior, labels.shape).astype(np.float32)
+    report.baselines["mean path prior (average training label)"] = pooled(counts(everywhere, labels, e.threshold))
+    return report
+
+
+def write_report(e: DictConfig, report: Report) -> None:
+    """evaluate.out_dir (results.md, results.csv, figures/), evaluate.plots_dir, evaluate.metrics_path."""
+    table = report.table()
+    with atomic_directory(e.out_dir) as tmp:
+        (tmp / "results.md").write_text(
+            "# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
+            "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(table) +
+            "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
+            "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + baseline_table(report.baselines)
+        )  # fmt: skip
+        (tmp / "results.csv").write_text(csv_text(table))
+        save_png(tmp / "figures" / "good_and_bad_cases.png", cases_figure(report, e.figure_cases, e.figure_scale))
+        save_png(tmp / "figures" / "postprocessing.png", postprocessing_figure(report, e.figure_cases, e.figure_scale))
+    with atomic_directory(e.plots_dir) as tmp:
+        for run, curve in report.curves.items():
+            lines = ["threshold,precision,recall"] + [f"{t:.4f},{p:.6f},{r:.6f}" for t, p, r in zip(*curve.values(), strict=True)]
+            (tmp / f"{run}.csv").write_text("\n".join(lines) + "\n")
+    write_text_atomic(e.metrics_path, json.dumps(report.metrics(), indent=2) + "\n")
+
+
+def cases_figure(report: Report, cases: int, scale: float) -> np.ndarray:
+    """Fig. 8: each network's best run, its best and worst test images by IoU."""
+    rows = []
+    for model in dict.fromkeys(split_run_name(r)[0] for r in report.runs):
+        best = report.best_run([r for r in report.runs if split_run_name(r)[0] == model])
+        ious = report.per_image_iou[best, "no"]
+        order = np.argsort(-ious, kind="stable")
+        for kind, i in [("good", i) for i in order[:cases]] + [("bad", i) for i in order[::-1][:cases]]:
+            rows.append((f"{best} {kind}", report.samples[i], load_maps([report.paths[best, "no"][i]])[0], float(ious[i])))
+    return good_and_bad_cases(rows, scale)
+
+
+def postprocessing_figure(report: Report, cases: int, scale: float) -> np.ndarray:
+    """Fig. 5: the best run's images whose IoU post-processing raised most, and lowered most."""
+    best = report.best_run()
+    before, after = report.per_image_iou[best, "no"], report.per_image_iou[best, "yes"]
+    order = np.argsort(-(after - before), kind="stable")
+    picks = list(dict.fromkeys([*order[:cases], *order[::-1][:cases]]))
+    rows = [(report.samples[i], *load_maps([report.paths[best, "no"][i], report.paths[best, "yes"][i]]), float(before[i]), float(after[i]))
+            for i in picks]  # fmt: skip
+    return before_and_after(rows, scale)
