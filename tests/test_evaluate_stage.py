@@ -65,7 +65,7 @@ def test_scores_match_the_known_predictions(scored):
 def test_outputs_follow_the_contract(scored, tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     assert set(metrics) == {"unet-none", "fcn-none", "baselines"} and metrics["unet-none"]["raw"]["iou"] == 1.0
-    assert any(name.startswith("mean path prior") for name in metrics["baselines"])
+    assert set(metrics["baselines"]) == {"non_corresponding.unet-none", "non_corresponding.fcn-none", "mean_path_prior"}
     assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 | 1.000 |" in (tmp_path / "evaluation" / "results.md").read_text()
     assert len((tmp_path / "evaluation" / "results.csv").read_text().splitlines()) == 5
     curve = np.loadtxt(tmp_path / "pr" / "unet-none.csv", delimiter=",", skiprows=1)

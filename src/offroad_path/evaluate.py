@@ -53,9 +53,8 @@ def log_to_mlflow(cfg: DictConfig, report: Report) -> None:
             return
         import mlflow
 
-        for name, scores in report.metrics().items():
-            if name != "baselines":
-                mlflow.log_metrics({f"{name}.{pp}.{k}": v for pp, row in scores.items() for k, v in row.items() if v is not None})
+        for name, scores in report.metrics().items():  # <run>.raw.iou, baselines.mean_path_prior.iou, ...
+            mlflow.log_metrics({f"{name}.{part}.{k}": v for part, row in scores.items() for k, v in row.items() if v is not None})
         linked = training_runs(cfg)
         mlflow.set_tags({f"training_run.{name}": run_id for name, run_id in linked.items()})
         table = report.table()

@@ -39,7 +39,7 @@ class Report:
     per_image_iou: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
     paths: dict[tuple[str, str], list[str]] = field(default_factory=dict)  # the maps behind each row
     curves: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # run -> precision-recall curve
-    baselines: dict[str, Scores] = field(default_factory=dict)
+    baselines: dict[str, Scores] = field(default_factory=dict)  # "non_corresponding.<run>", "mean_path_prior"
 
     def table(self) -> list[ResultRow]:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
@@ -85,12 +85,11 @@ def score_runs(e: DictConfig) -> Report:
             report.rows[run, pp], report.per_image_iou[run, pp] = score(network_name(model), pretraining, pp, maps, labels, e.threshold)
             if pp == "no":
                 report.curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
-                name = f"{network_name(model)} ({pretraining}) against non-corresponding ground truth"
-                report.baselines[name] = baseline(maps > e.threshold, labels, report.samples)
+                report.baselines[f"non_corresponding.{run}"] = baseline(maps > e.threshold, labels, report.samples)
         log.info("%s: IoU %.3f, post-processed %.3f", run, report.rows[run, "no"].iou, report.rows[run, "yes"].iou)
     prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
     everywhere = np.broadcast_to(prior, labels.shape).astype(np.float32)
-    report.baselines["mean path prior (average training label)"] = pooled(counts(everywhere, labels, e.threshold))
+    report.baselines["mean_path_prior"] = pooled(counts(everywhere, labels, e.threshold))
     return report
 
 

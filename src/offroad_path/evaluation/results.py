@@ -81,10 +81,18 @@ def markdown_table(rows: list[ResultRow]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def baseline_name(key: str) -> str:
+    """'non_corresponding.unet-none' -> 'U-Net (none) against non-corresponding ground truth'."""
+    if key.startswith("non_corresponding."):
+        model, pretraining = split_run_name(key.removeprefix("non_corresponding."))
+        return f"{network_name(model)} ({pretraining}) against non-corresponding ground truth"
+    return {"mean_path_prior": "mean path prior (average training label)"}.get(key, key)
+
+
 def baseline_table(baselines: dict[str, Scores]) -> str:
     lines = ["| baseline | accuracy | recall | precision | IoU |", "| --- | --- | --- | --- | --- |"]
-    for name, s in baselines.items():
-        lines.append(f"| {name} | {fmt(s.accuracy)} | {fmt(s.recall)} | {fmt(s.precision)} | {fmt(s.iou)} |")
+    for key, s in baselines.items():
+        lines.append(f"| {baseline_name(key)} | {fmt(s.accuracy)} | {fmt(s.recall)} | {fmt(s.precision)} | {fmt(s.iou)} |")
     return "\n".join(lines) + "\n"
 
 
