@@ -269,7 +269,7 @@ class ExportConfig:
     """ONNX export of a trained path model, checked against PyTorch."""
 
     checkpoint: str = "${train.out_dir}/checkpoints/best.ckpt"
-    out: str = "${train.out_dir}/model.onnx"
+    out: str = "exports/${model.name}-${pretraining.name}.onnx"  # outside DVC's outputs
     opset: int = 18
     tolerance: float = 1e-4  # max abs difference of the path confidence against PyTorch
 
