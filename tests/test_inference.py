@@ -143,3 +143,9 @@ def test_bad_input_gets_one_clear_line_and_no_output(trained, tmp_path, make, me
         " (.png, .jpg, .jpeg, .bmp)" if message == "holds no images" else " (OpenCV could not decode a frame)"
     )
     assert not (tmp_path / "out").exists()
+
+
+def test_predict_without_an_input_says_what_to_give(trained):
+    run = subprocess.run([sys.executable, "-m", "offroad_path.predict", f"predict.checkpoint={trained[0]}"], capture_output=True, text=True)
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1] == "error: predict.input is required: give it on the command line, predict.input=..."

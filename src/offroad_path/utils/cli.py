@@ -12,6 +12,7 @@ from typing import Any
 
 import hydra
 from omegaconf import DictConfig
+from omegaconf.errors import MissingMandatoryValue
 
 from offroad_path.sequence.errors import SequenceError
 
@@ -25,6 +26,9 @@ def clear_errors() -> Iterator[None]:
     """Turn bad-input errors into one line naming the file, and exit status 2 (no traceback)."""
     try:
         yield
+    except MissingMandatoryValue as e:  # a required setting (`???` in conf/) was not given
+        print(f"error: {e.full_key} is required: give it on the command line, {e.full_key}=...", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from e
     except (SequenceError, FileNotFoundError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT) from e
