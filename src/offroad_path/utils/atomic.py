@@ -10,6 +10,14 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+_UNFINISHED: set[Path] = set()  # temporary folders of this process's outputs still being written
+
+
+def remove_unfinished() -> None:
+    """Delete the temporary folders of outputs still being written: for a process being stopped."""
+    for tmp in list(_UNFINISHED):
+        shutil.rmtree(tmp, ignore_errors=True)
+
 
 @contextlib.contextmanager
 def atomic_directory(target: str | Path) -> Iterator[Path]:
@@ -18,11 +26,14 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
     tmp.chmod(0o755)
+    _UNFINISHED.add(tmp)
     try:
         yield tmp
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        _UNFINISHED.discard(tmp)
     old = target.parent / f".{target.name}.old-{os.getpid()}"
     if target.exists():
         os.replace(target, old)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import multiprocessing
+import os
 import signal
 import sys
 from collections.abc import Callable, Iterator
@@ -15,6 +17,7 @@ from omegaconf import DictConfig
 from omegaconf.errors import MissingMandatoryValue
 
 from offroad_path.sequence.errors import SequenceError
+from offroad_path.utils.atomic import remove_unfinished
 
 log = logging.getLogger("offroad_path")
 
@@ -35,7 +38,17 @@ def clear_errors() -> Iterator[None]:
 
 
 def _stop(signum: int, frame: Any) -> None:
-    raise SystemExit(128 + signum)
+    """On SIGTERM: stop the worker processes, delete unfinished outputs, exit 128 + signal.
+
+    Done here rather than by raising SystemExit, which Python drops when the signal lands while
+    the main thread runs a finaliser (seen once in CI: the stage then ran on to the end)."""
+    children = multiprocessing.active_children()
+    for child in children:
+        child.terminate()
+    for child in children:
+        child.join(timeout=5)
+    remove_unfinished()
+    os._exit(128 + signum)
 
 
 CONF_DIR = Path(__file__).resolve().parents[3] / "conf"
@@ -50,8 +63,8 @@ def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
 
     @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        # A stop (kill, `dvc` interrupted) unwinds like an error, so atomic outputs delete their
-        # temporary folders instead of leaving them beside the outputs.
+        # A stop (kill, `dvc` interrupted) deletes the temporary folders of unfinished outputs
+        # instead of leaving them beside the outputs.
         signal.signal(signal.SIGTERM, _stop)
         with clear_errors():
             stage(cfg)
