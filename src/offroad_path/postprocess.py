@@ -19,6 +19,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.dataset import load_depth
 from offroad_path.data.manifest import prediction_name, read_predictions_manifest, write_predictions_manifest
+from offroad_path.evaluation.results import load_maps
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.utils.atomic import atomic_directory
 from offroad_path.utils.cli import hydra_stage
@@ -26,13 +27,6 @@ from offroad_path.utils.cli import hydra_stage
 log = logging.getLogger("offroad_path.postprocess")
 
 BATCH = 64  # maps in memory at once
-
-
-def load_map(path: str) -> np.ndarray:
-    try:
-        return np.load(path).astype(np.float32)
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not a readable confidence map ({e})") from e
 
 
 def run_postprocess(cfg: DictConfig) -> int:
@@ -44,7 +38,7 @@ def run_postprocess(cfg: DictConfig) -> int:
     with atomic_directory(out_dir) as tmp:
         for start in range(0, len(rows), BATCH):
             batch = rows[start : start + BATCH]
-            maps = np.stack([load_map(path) for _, path in batch])  # (B, H, W)
+            maps = load_maps([path for _, path in batch])  # (B, H, W)
             depth = np.stack([load_depth(sample) for sample, _ in batch]) if params.use_depth else None
             if depth is not None and depth.shape != maps.shape:
                 raise ValueError(f"{batch[0][0].disparity}: disparity of shape {depth.shape[1:]} differs from the maps' {maps.shape[1:]}")
