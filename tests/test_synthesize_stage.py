@@ -15,7 +15,7 @@ from hydra.errors import ConfigCompositionException
 
 from offroad_path.sequence import open_sequence
 from offroad_path.synthesize import synthesize
-from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.atomic import MARKER, atomic_directory
 from offroad_path.world.classes import CLASS_NAMES
 
 TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.height=96", "synthesize.workers=2")
@@ -24,10 +24,11 @@ TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.he
 def test_writes_the_sequence_contract(compose_config, tmp_path):
     out = tmp_path / "synthetic"
     out.mkdir()
+    (out / MARKER).write_text("synthesize\n")  # an earlier run's output: replaced whole
     (out / "stale.txt").write_text("from an earlier run")
     cfg = compose_config(*TINY, f"synthesize.out_dir={out}", "world/rig=gopro")
     synthesize(cfg)
-    assert sorted(p.name for p in out.iterdir()) == ["seq_000", "seq_001", "summary.json"]  # rewritten whole
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "seq_000", "seq_001", "summary.json"]  # rewritten whole
     assert not list(tmp_path.glob(".synthetic*"))  # no temporary leftovers
     seq = open_sequence(out / "seq_000")
     assert len(seq) == 3 and seq.image_size == (160, 96)
@@ -56,12 +57,13 @@ def test_writes_the_sequence_contract(compose_config, tmp_path):
 def test_atomic_directory_keeps_the_old_output_on_failure(tmp_path):
     target = tmp_path / "out"
     target.mkdir()
+    (target / MARKER).write_text("test\n")
     (target / "good.txt").write_text("previous complete run")
-    with pytest.raises(RuntimeError), atomic_directory(target) as tmp:
+    with pytest.raises(RuntimeError), atomic_directory(target, "test") as tmp:
         (tmp / "half.txt").write_text("partial")
         raise RuntimeError("interrupted")
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
-    assert [p.name for p in target.iterdir()] == ["good.txt"]
+    assert sorted(p.name for p in target.iterdir()) == [MARKER, "good.txt"]
 
 
 @pytest.mark.parametrize(

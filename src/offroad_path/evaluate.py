@@ -16,7 +16,7 @@ from dataclasses import asdict
 
 from omegaconf import DictConfig
 
-from offroad_path.evaluation.report import Report, score_runs, write_report
+from offroad_path.evaluation.report import Report, check_outputs, score_runs, write_report
 from offroad_path.evaluation.results import ResultRow, split_run_name
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.tracking import stage_run, tracking_uri
@@ -25,6 +25,7 @@ log = logging.getLogger("offroad_path.evaluate")
 
 
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
+    check_outputs(cfg.evaluate)
     report = score_runs(cfg.evaluate)
     write_report(cfg.evaluate, report)
     log_to_mlflow(cfg, report)

@@ -19,9 +19,9 @@ import cv2
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.labelling.labeller import label_sequence
+from offroad_path.labelling.labeller import check_inputs, label_sequence
 from offroad_path.sequence.reader import find_sequences, open_sequence
-from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.parallel import map_processes
 from offroad_path.utils.tracking import stage_run
@@ -42,11 +42,12 @@ def sequence_names(roots: list[Path], in_dir: Path) -> list[str]:
 
 def label(cfg: DictConfig) -> dict:
     in_dir, out_dir = Path(cfg.label.in_dir), Path(cfg.label.out_dir)
+    check_output_dir(out_dir, "label.out_dir", [in_dir])
     roots = find_sequences(in_dir)
     for root in roots:  # validate everything before any work
-        open_sequence(root)
+        check_inputs(open_sequence(root), cfg.label)
     names = sequence_names(roots, in_dir)
-    with stage_run(cfg, "label") as run, atomic_directory(out_dir) as tmp:
+    with stage_run(cfg, "label") as run, atomic_directory(out_dir, "label", [in_dir], key="label.out_dir") as tmp:
         jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
         summaries = map_processes(_label_job, jobs, cfg.label.workers)
         drifts = [s["drift"] for s in summaries if s["drift"]]
@@ -55,17 +56,22 @@ def label(cfg: DictConfig) -> dict:
             "labels": sum(s["kept"] for s in summaries),
             "segments_dropped": sum(s["dropped"] for s in summaries),
             "vo_failed_steps": sum(s.get("vo_failed_steps", 0) for s in summaries),
+            "warnings": sum(len(s["warnings"]) for s in summaries),
         }
         if drifts:
             for key in ("translation_drift_pct", "rotation_drift_deg_per_m"):
                 metrics[key] = float(np.mean([d[key] for d in drifts]))
+        if not metrics["labels"]:
+            raise ValueError(
+                f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"])
+            )
         (tmp / "summary.json").write_text(json.dumps({"metrics": metrics, "sequences": summaries}, indent=2) + "\n")
-        write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n")
         if run is not None:
             import mlflow
 
             mlflow.log_metrics(metrics)
             mlflow.log_artifact(str(tmp / "summary.json"))
+    write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n")  # only once the labels are in place
     log.info(
         "labelled %d sequences: %d segments kept, %d dropped, %d labels written to %s%s",
         metrics["sequences"], metrics["labels"], metrics["segments_dropped"], metrics["labels"], out_dir,

@@ -21,7 +21,7 @@ from offroad_path.data.dataset import load_depth
 from offroad_path.data.manifest import prediction_name, read_predictions_manifest, write_predictions_manifest
 from offroad_path.evaluation.results import load_maps
 from offroad_path.postprocessing import PostprocessParams, postprocess
-from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.atomic import atomic_directory, check_output_dir
 from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.postprocess")
@@ -32,10 +32,11 @@ BATCH = 64  # maps in memory at once
 def run_postprocess(cfg: DictConfig) -> int:
     c = cfg.postprocess
     params = PostprocessParams(c.max_depth_m, c.sigma, c.delta, c.use_depth)
-    rows = read_predictions_manifest(Path(c.predictions_dir) / "manifest.csv")
     out_dir = Path(c.out_dir)
+    check_output_dir(out_dir, "postprocess.out_dir", [c.predictions_dir])
+    rows = read_predictions_manifest(Path(c.predictions_dir) / "manifest.csv")
     written, seconds = [], 0.0
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, "postprocess", [c.predictions_dir], key="postprocess.out_dir") as tmp:
         for start in range(0, len(rows), BATCH):
             batch = rows[start : start + BATCH]
             maps = load_maps([path for _, path in batch])  # (B, H, W)

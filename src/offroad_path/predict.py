@@ -23,7 +23,7 @@ from offroad_path.inference.overlay import tint
 from offroad_path.inference.runners import load_model
 from offroad_path.inference.sources import open_source
 from offroad_path.postprocessing import PostprocessParams, postprocess
-from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.atomic import atomic_directory, check_output_dir
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.tracking import tracking_uri
 
@@ -33,11 +33,13 @@ DEFAULT_FPS = 10.0
 
 def run_predict(cfg: DictConfig) -> dict:
     p, pp = cfg.predict, cfg.postprocess
+    inputs = [p.input] + ([p.checkpoint] if p.checkpoint else [])
+    check_output_dir(p.out_dir, "predict.out_dir", inputs)
     model = load_model(p.checkpoint, p.run_id, tracking_uri(cfg.mlflow), p.device)
-    source = open_source(p.input, cfg.label.disparity if p.postprocess else None, p.max_frames)
+    source = open_source(p.input, cfg.label.disparity if p.postprocess else None, p.max_frames, p.max_image_pixels)
     fps = p.video_fps or source.fps or DEFAULT_FPS
     frames, model_seconds, start = 0, 0.0, time.perf_counter()
-    with atomic_directory(p.out_dir) as tmp:
+    with atomic_directory(p.out_dir, "predict", inputs, key="predict.out_dir") as tmp:
         (tmp / "confidence").mkdir()
         (tmp / "overlay").mkdir()
         video = None

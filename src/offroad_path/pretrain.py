@@ -24,7 +24,7 @@ def pretrain(cfg: DictConfig) -> dict:
     if cfg.pretrain.max_epochs is not None:
         cfg = cfg.copy()
         cfg.trainer.max_epochs = cfg.pretrain.max_epochs
-    metrics, _, _ = fit(cfg, "pretrain", "semantic", len(CLASS_NAMES), Path(cfg.pretrain.out_dir), "none")
+    metrics = fit(cfg, "pretrain", "semantic", len(CLASS_NAMES), Path(cfg.pretrain.out_dir), "none")
     log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])
     return metrics
 

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.data.manifest import Sample, write_manifest
+from offroad_path.data.manifest import Sample, data_root, write_manifest
 from offroad_path.data.splitting import Frame, split_frames
 from offroad_path.sequence.poses import read_poses
 from offroad_path.sequence.reader import open_sequence
-from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.atomic import atomic_directory, check_output_dir
 from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.split")
@@ -47,12 +47,14 @@ def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int]
 
 def split(cfg: DictConfig) -> dict:
     c = cfg.split
+    check_output_dir(c.out_dir, "split.out_dir", [c.labels_dir])
     frames, samples = labelled_frames(Path(c.labels_dir))
     if not frames:
         raise ValueError(f"{c.labels_dir}: holds no labels to split")
     parts, guarded = split_frames(frames, c.strategy, c.test_fraction, c.val_fraction, c.block_m, c.guard_m, c.seed)
     counts = {}
-    with atomic_directory(c.out_dir) as tmp:
+    inputs = [c.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
+    with atomic_directory(c.out_dir, "split", [c.labels_dir], key="split.out_dir") as tmp:
         for name, part in parts.items():
             rows = []
             for frame in part:
@@ -62,7 +64,8 @@ def split(cfg: DictConfig) -> dict:
                     rows.append(Sample(**{**sample.__dict__, "mirrored": True}))
             write_manifest(tmp / f"{name}.csv", rows)
             counts[name] = len(rows)
-        summary = {"frames": len(frames), "guarded_out": guarded, "samples": counts, "strategy": c.strategy, "mirror": c.mirror}
+        summary = {"frames": len(frames), "guarded_out": guarded, "samples": counts, "strategy": c.strategy, "mirror": c.mirror,
+                   "data_root": data_root(inputs)}  # fmt: skip
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     log.info("split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones",
              len(frames), counts, " (with mirrored copies)" if c.mirror else "", guarded)  # fmt: skip

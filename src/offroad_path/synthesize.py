@@ -18,7 +18,7 @@ from offroad_path.world.record import record_sequences
 
 def synthesize(cfg: DictConfig) -> list[dict]:
     out_dir = Path(cfg.synthesize.out_dir)
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:
         summaries = record_sequences(cfg.world, cfg.synthesize.sequences, cfg.synthesize.seed, tmp, cfg.synthesize.workers)
         report = {"classes": list(CLASS_NAMES), "sequences": summaries}
         (tmp / "summary.json").write_text(json.dumps(report, indent=2) + "\n")

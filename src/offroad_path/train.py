@@ -4,8 +4,9 @@ and write the test-set confidence maps for post-processing (see DESIGN.md).
     python -m offroad_path.train model=segnet pretraining=segmentation
     python -m offroad_path.train -m model=segnet,fcn,unet pretraining=none,segmentation
 
-Writes train.out_dir (data/runs/<model>-<pretraining>): checkpoints/ (best.ckpt, last.ckpt),
-metrics.json, predictions/ (float16 .npy per test sample and manifest.csv); logs to MLflow.
+Writes train.out_dir (data/runs/<model>-<pretraining>): checkpoints/best.ckpt, metrics.json,
+predictions/ (float16 .npy per test sample and manifest.csv); logs to MLflow. Resumable state lives
+beside it in data/runs/.resume/ (see offroad_path.training.run.fit).
 """
 
 from __future__ import annotations
@@ -23,10 +24,14 @@ log = logging.getLogger("offroad_path.train")
 
 def train(cfg: DictConfig) -> dict:
     out_dir = Path(cfg.train.out_dir)
-    metrics, task, data = fit(cfg, "train", "path", 2, out_dir, cfg.pretraining.name)
-    written = write_confidence_maps(task, data, out_dir / "predictions")
-    log.info("%s-%s: best validation IoU %s, test IoU %.4f; %d confidence maps in %s", cfg.model.name, cfg.pretraining.name,
-             metrics["best_val_iou"], metrics["test/iou"], written, out_dir / "predictions")  # fmt: skip
+
+    def predictions(task, data, tmp: Path) -> None:
+        written = write_confidence_maps(task, data, tmp / "predictions", out_dir / "predictions")
+        log.info("%d confidence maps in %s", written, out_dir / "predictions")
+
+    metrics = fit(cfg, "train", "path", 2, out_dir, cfg.pretraining.name, predictions)
+    log.info("%s-%s: best validation IoU %s, test IoU %.4f", cfg.model.name, cfg.pretraining.name, metrics["best_val_iou"],
+             metrics["test/iou"])  # fmt: skip
     return metrics
 
 

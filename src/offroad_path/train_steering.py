@@ -26,7 +26,8 @@ from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
 from offroad_path.steering.frames import steering_split
 from offroad_path.steering.task import SteeringTask
-from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.training.checkpoints import load_weights, save_weights
+from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 
@@ -58,23 +59,26 @@ def predict(task: SteeringTask, loader) -> tuple[np.ndarray, np.ndarray]:
 
 def train_steering(cfg: DictConfig) -> dict:
     s, t = cfg.steering, cfg.trainer
+    check_output_dir(s.out_dir, "steering.out_dir", [s.labels_dir, s.split_dir])
     L.seed_everything(s.seed, workers=True)
     parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror)
     data = SteeringDataModule(parts, s.width, s.height, s.batch_size, s.jitter, s.seed)
     task = SteeringTask(s.width, s.height, s.lr, s.lr_step_epochs, s.lr_gamma, s.momentum, s.weight_decay)
     logger = steering_logger(cfg)
     out_dir = Path(s.out_dir)
-    with atomic_directory(out_dir) as tmp:
-        best = ModelCheckpoint(dirpath=tmp / "checkpoints", filename="best", monitor="val/mae", mode="min")
+    with atomic_directory(out_dir, "train_steering", [s.labels_dir, s.split_dir], key="steering.out_dir") as tmp:
+        best = ModelCheckpoint(dirpath=tmp / "checkpoints", filename="best", monitor=task.monitor, mode=task.mode)
         trainer = L.Trainer(
             max_epochs=s.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
-            precision=t.precision, deterministic=t.deterministic,
-            log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run, logger=logger if logger is not None else False,
-            callbacks=[best, EarlyStopping("val/mae", mode="min", patience=s.patience)], default_root_dir=tmp, enable_progress_bar=False,
+            precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
+            logger=logger if logger is not None else False, default_root_dir=tmp, enable_progress_bar=False,
+            callbacks=[best, EarlyStopping(task.monitor, mode=task.mode, patience=s.patience)],
         )  # fmt: skip
         trainer.fit(task, data)
         if best.best_model_path:
-            task = SteeringTask.load_from_checkpoint(best.best_model_path)
+            # Published as weights and hyper-parameters only: Lightning's checkpoint names the temporary folder.
+            load_weights(task, best.best_model_path)
+            save_weights(Path(best.best_model_path), task)
         true, predicted = predict(task, data.test_dataloader())
         best_val = None if best.best_model_score is None else float(best.best_model_score)
         metrics = {**steering_metrics(true, predicted), "best_val_mae": best_val, "epochs": trainer.current_epoch}

@@ -7,7 +7,7 @@ from pathlib import Path
 import lightning as L
 from torch.utils.data import DataLoader
 
-from offroad_path.data.dataset import ManifestDataset, transforms
+from offroad_path.data.dataset import EpochSampler, ManifestDataset, transforms
 from offroad_path.data.manifest import Sample, read_manifest
 
 
@@ -23,15 +23,17 @@ class OffroadDataModule(L.LightningDataModule):
         self.samples: dict[str, list[Sample]] = {}
 
     def setup(self, stage: str | None = None) -> None:
+        """Read the manifests and check that every file they list exists, before any training."""
         for name in ("train", "val", "test"):
             if name not in self.samples:
-                self.samples[name] = read_manifest(self.split_dir / f"{name}.csv")
+                self.samples[name] = read_manifest(self.split_dir / f"{name}.csv", check_files=True)
 
     def _loader(self, name: str, train: bool) -> DataLoader:
         hp = self.hparams
         transform = transforms(hp.width, hp.height, augment=train and hp.augment, jitter=hp.jitter, min_scale=hp.min_scale, seed=hp.seed)
         dataset = ManifestDataset(self.samples[name], hp.target, transform)
-        return DataLoader(dataset, batch_size=hp.batch_size, shuffle=train, drop_last=train and len(dataset) > hp.batch_size,
+        sampler = EpochSampler(len(dataset), hp.seed) if train else None
+        return DataLoader(dataset, batch_size=hp.batch_size, sampler=sampler, drop_last=train and len(dataset) > hp.batch_size,
                           num_workers=hp.num_workers, pin_memory=hp.pin_memory, persistent_workers=hp.num_workers > 0)  # fmt: skip
 
     def train_dataloader(self) -> DataLoader:

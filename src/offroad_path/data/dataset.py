@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import albumentations as A
 import cv2
 import numpy as np
 import torch
 from albumentations.pytorch import ToTensorV2
-from torch.utils.data import Dataset
+from torch.utils.data import Dataset, Sampler
 
 from offroad_path.data.manifest import Sample
 from offroad_path.labelling.disparity import decode_disparity, depth_from_disparity
@@ -63,6 +65,27 @@ def transforms(width: int, height: int, augment: bool, jitter: float = 0.2, min_
     return A.Compose([*ops, A.Normalize(), ToTensorV2()], seed=seed)
 
 
+class EpochSampler(Sampler):
+    """Shuffles with a generator seeded by (seed, epoch) and gives each sample its own augmentation
+    seed: an epoch is the same whether a run went straight through or was resumed before it.
+    Lightning calls set_epoch before each training epoch, as it does for a DistributedSampler."""
+
+    def __init__(self, size: int, seed: int, shuffle: bool = True):
+        self.size, self.seed, self.shuffle, self.epoch = size, seed, shuffle, 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __iter__(self) -> Iterator[tuple[int, int]]:
+        generator = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+        order = torch.randperm(self.size, generator=generator) if self.shuffle else torch.arange(self.size)
+        seeds = torch.randint(0, 2**31 - 1, (self.size,), generator=generator)
+        return iter(zip(order.tolist(), seeds.tolist(), strict=True))
+
+
 class ManifestDataset(Dataset):
     def __init__(self, samples: list[Sample], target: str, transform: A.Compose):
         if target not in TARGETS:
@@ -74,7 +97,12 @@ class ManifestDataset(Dataset):
     def __len__(self) -> int:
         return len(self.samples)
 
-    def __getitem__(self, i: int) -> dict:
+    def __getitem__(self, key: int | tuple[int, int]) -> dict:
+        """key: an index, or (index, seed) from EpochSampler: then the augmentation of this sample is
+        drawn from `seed` alone, whatever the worker or the point a run was resumed from."""
+        i, seed = key if isinstance(key, tuple) else (key, None)
+        if seed is not None:
+            self.transform.set_random_seed(seed)
         image, mask = load_sample(self.samples[i], self.target)
         out = self.transform(image=image, mask=mask)
         return {"image": out["image"], "target": out["mask"].long(), "index": torch.tensor(i)}

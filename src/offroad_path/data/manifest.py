@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import csv
+import json
+import os
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -46,8 +48,35 @@ def _rows(path: str | Path, columns: list[str], made_by: str) -> list[dict]:
         return list(reader)
 
 
-def read_manifest(path: str | Path) -> list[Sample]:
-    return [_sample(r) for r in _rows(path, COLUMNS, "split")]
+def data_root(paths: list[str | Path]) -> str:
+    """The deepest folder holding all `paths`: relative to the working directory when inside it, so
+    that a split made in one checkout reads the same in another."""
+    common = Path(os.path.commonpath([Path(p).resolve() for p in paths]))
+    return str(common.relative_to(Path.cwd())) if common.is_relative_to(Path.cwd()) else str(common)
+
+
+def _check_inside(path: Path, row: int, column: str, value: str, root: Path) -> None:
+    if value and not Path(value).resolve().is_relative_to(root.resolve()):
+        raise ValueError(f"{path}: row {row}, {column} {value!r} lies outside the data root {root}; refused")
+
+
+def read_manifest(path: str | Path, check_files: bool = False) -> list[Sample]:
+    """A split manifest's samples. Every path in it must lie inside the data root the split stage
+    recorded beside it (summary.json), and with check_files, exist."""
+    path = Path(path)
+    rows = _rows(path, COLUMNS, "split")
+    summary = path.parent / "summary.json"
+    root = json.loads(summary.read_text()).get("data_root") if summary.is_file() else None
+    for number, r in enumerate(rows, start=2):
+        for column in ("image", "label", "disparity", "semantic"):
+            if root is not None:
+                _check_inside(path, number, column, r[column], Path(root))
+            if check_files and r[column] and not Path(r[column]).is_file():
+                raise FileNotFoundError(f"{path}: row {number}, {column} {r[column]} does not exist")
+    try:
+        return [_sample(r) for r in rows]
+    except (KeyError, ValueError) as e:
+        raise ValueError(f"{path}: a row is malformed ({e})") from e
 
 
 # Confidence maps (written by `train`, `postprocess`): a split's samples with one .npy map each.
@@ -67,4 +96,12 @@ def write_predictions_manifest(path: Path, rows: list[tuple[Sample, str]]) -> No
 
 
 def read_predictions_manifest(path: str | Path, made_by: str = "train") -> list[tuple[Sample, str]]:
-    return [(_sample(r), r["prediction"]) for r in _rows(path, PREDICTION_COLUMNS, made_by)]
+    """Samples and their map files; every map must lie inside the manifest's own folder."""
+    path = Path(path)
+    rows = _rows(path, PREDICTION_COLUMNS, made_by)
+    for number, r in enumerate(rows, start=2):
+        _check_inside(path, number, "prediction", r["prediction"], path.parent)
+    try:
+        return [(_sample(r), r["prediction"]) for r in rows]
+    except (KeyError, ValueError) as e:
+        raise ValueError(f"{path}: a row is malformed ({e})") from e

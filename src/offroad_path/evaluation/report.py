@@ -25,7 +25,7 @@ from offroad_path.evaluation.results import (
     score,
     split_run_name,
 )
-from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 
 log = logging.getLogger(__name__)
 POSTPROCESSING = ("no", "yes")
@@ -93,10 +93,21 @@ def score_runs(e: DictConfig) -> Report:
     return report
 
 
+def evaluate_inputs(e: DictConfig) -> list[str]:
+    return [e.runs_dir, e.postprocessed_dir, str(Path(e.train_manifest).parent)]
+
+
+def check_outputs(e: DictConfig) -> None:
+    """Before any scoring: the output folders may be written (see utils.atomic)."""
+    for key in ("out_dir", "plots_dir"):
+        check_output_dir(e[key], f"evaluate.{key}", evaluate_inputs(e))
+
+
 def write_report(e: DictConfig, report: Report) -> None:
     """evaluate.out_dir (results.md, results.csv, figures/), evaluate.plots_dir, evaluate.metrics_path."""
     table = report.table()
-    with atomic_directory(e.out_dir) as tmp:
+    inputs = evaluate_inputs(e)
+    with atomic_directory(e.out_dir, "evaluate", inputs, key="evaluate.out_dir") as tmp:
         (tmp / "results.md").write_text(
             "# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
             "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(table) +
@@ -106,7 +117,7 @@ def write_report(e: DictConfig, report: Report) -> None:
         (tmp / "results.csv").write_text(csv_text(table))
         save_png(tmp / "figures" / "good_and_bad_cases.png", cases_figure(report, e.figure_cases, e.figure_scale))
         save_png(tmp / "figures" / "postprocessing.png", postprocessing_figure(report, e.figure_cases, e.figure_scale))
-    with atomic_directory(e.plots_dir) as tmp:
+    with atomic_directory(e.plots_dir, "evaluate", inputs, key="evaluate.plots_dir") as tmp:
         for run, curve in report.curves.items():
             lines = ["threshold,precision,recall"] + [f"{t:.4f},{p:.6f},{r:.6f}" for t, p, r in zip(*curve.values(), strict=True)]
             (tmp / f"{run}.csv").write_text("\n".join(lines) + "\n")

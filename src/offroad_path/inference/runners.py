@@ -32,17 +32,22 @@ class PathModel:
 
 class TorchModel(PathModel):
     def __init__(self, checkpoint: str | Path, device: str = "cpu"):
+        from offroad_path.models import MODELS
+        from offroad_path.training.checkpoints import CheckpointError, load_checkpoint, load_weights
         from offroad_path.training.task import SegmentationTask
 
         checkpoint = Path(checkpoint)
-        if not checkpoint.is_file():
-            raise FileNotFoundError(f"{checkpoint}: no such checkpoint")
-        saved = torch.load(checkpoint, map_location="cpu", weights_only=False)
-        data = saved.get("datamodule_hyper_parameters") or {}
-        if "width" not in data or "height" not in data or saved.get("hyper_parameters", {}).get("num_classes") != 2:
-            raise ValueError(f"{checkpoint}: not a path model checkpoint of the train stage (no 2-class head or input size)")
+        saved = load_checkpoint(checkpoint)  # weights_only: a crafted file cannot run code
+        hp, data = saved["hyper_parameters"], saved.get("datamodule_hyper_parameters") or {}
+        if "width" not in data or "height" not in data or hp.get("num_classes") != 2 or hp.get("model") not in MODELS:
+            raise CheckpointError(f"{checkpoint}: not a path model checkpoint of the train stage (no 2-class network or input size)")
         self.width, self.height = int(data["width"]), int(data["height"])
-        self.task = SegmentationTask.load_from_checkpoint(checkpoint, map_location=device).eval()
+        try:
+            self.task = SegmentationTask(**hp)
+        except TypeError as e:
+            raise CheckpointError(f"{checkpoint}: its hyper-parameters do not describe a path network ({e})") from e
+        load_weights(self.task, checkpoint, saved)
+        self.task = self.task.to(device).eval()
         self.device = device
 
     def run(self, batch: torch.Tensor) -> np.ndarray:

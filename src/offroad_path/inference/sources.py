@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from offroad_path.labelling.disparity import compute_disparity, depth_from_disparity, sgbm
-from offroad_path.sequence.reader import open_sequence
+from offroad_path.sequence.reader import MAX_IMAGE_PIXELS, check_pixels, open_sequence
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 
@@ -31,27 +31,43 @@ class FrameSource:
     frames: Iterator[Frame]
 
 
-def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = None) -> FrameSource:
-    """Frames of `path`; stereo depth (StereoSGBM with disparity_cfg) for sequences when given a config."""
+def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = None, max_pixels: int = MAX_IMAGE_PIXELS) -> FrameSource:
+    """Frames of `path`; stereo depth (StereoSGBM with disparity_cfg) for sequences when given a config.
+    Every image's declared size is checked against max_pixels before anything is decoded."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such folder or video file")
     if path.is_dir() and (path / "calib.txt").is_file():
-        return _sequence(path, disparity_cfg, max_frames)
+        return _sequence(path, disparity_cfg, max_frames, max_pixels)
     if path.is_dir():
-        return _folder(path, max_frames)
-    return _video(path, max_frames)
+        return _folder(path, max_frames, max_pixels)
+    return _video(path, max_frames, max_pixels)
+
+
+def image_size(path: Path) -> tuple[int, int]:
+    """(width, height) from an image file's header, without decoding its pixels."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            return image.size
+    except Image.DecompressionBombError as e:  # Pillow's own cap, far above ours, refuses it first
+        raise ValueError(f"{path}: declares too many pixels; it is not decoded ({e})") from e
+    except (OSError, SyntaxError, ValueError) as e:
+        raise ValueError(f"{path}: cannot be read as an image ({e})") from e
 
 
 def _limit(n: int, max_frames: int | None) -> int:
     return n if max_frames is None else min(n, max_frames)
 
 
-def _folder(path: Path, max_frames: int | None) -> FrameSource:
+def _folder(path: Path, max_frames: int | None, max_pixels: int) -> FrameSource:
     files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     files = files[: _limit(len(files), max_frames)]
     if not files:
         raise ValueError(f"{path}: holds no images ({', '.join(IMAGE_SUFFIXES)})")
+    for file in files:
+        check_pixels(file, *image_size(file), max_pixels)
 
     def frames() -> Iterator[Frame]:
         for file in files:
@@ -63,8 +79,9 @@ def _folder(path: Path, max_frames: int | None) -> FrameSource:
     return FrameSource("folder", path, len(files), None, frames())
 
 
-def _sequence(path: Path, disparity_cfg, max_frames: int | None) -> FrameSource:
+def _sequence(path: Path, disparity_cfg, max_frames: int | None, max_pixels: int) -> FrameSource:
     seq = open_sequence(path)  # validates calibration, pairs, sizes
+    check_pixels(seq.left[0], *seq.image_size, max_pixels)
     n = _limit(len(seq), max_frames)
     fps = None
     if seq.times is not None and len(seq.times) > 1 and np.median(np.diff(seq.times)) > 0:
@@ -82,8 +99,14 @@ def _sequence(path: Path, disparity_cfg, max_frames: int | None) -> FrameSource:
     return FrameSource("sequence", path, n, fps, frames())
 
 
-def _video(path: Path, max_frames: int | None) -> FrameSource:
+def _video(path: Path, max_frames: int | None, max_pixels: int) -> FrameSource:
     capture = cv2.VideoCapture(str(path))
+    if capture.isOpened():
+        try:
+            check_pixels(path, int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)), max_pixels)
+        except ValueError:
+            capture.release()
+            raise
     ok, first = capture.read() if capture.isOpened() else (False, None)
     if not ok:
         capture.release()

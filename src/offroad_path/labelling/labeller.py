@@ -59,17 +59,29 @@ def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
     return VehicleFootprint(**values)
 
 
+def pose_file(seq: Sequence, cfg) -> Path:
+    """The pose file label.poses.source=file reads for `seq`; SequenceError when there is none."""
+    path = Path(cfg.poses.file.format(name=seq.name)) if cfg.poses.file else seq.poses_path
+    if path is None:
+        raise SequenceError(seq.root, "has no poses.txt (or poses/XX.txt) for label.poses.source=file")
+    if not path.is_file():
+        raise SequenceError(path, "is missing (label.poses.file)")
+    return path
+
+
+def check_inputs(seq: Sequence, cfg) -> None:
+    """What label_sequence needs besides the images, checked before any work: footprint and poses."""
+    footprint_for(seq, cfg.footprint)
+    if cfg.poses.source == "file":
+        read_poses(pose_file(seq, cfg), expected_rows=len(seq))
+
+
 def poses_for(seq: Sequence, cfg) -> tuple[np.ndarray, OdometryRun | None]:
     if cfg.poses.source == "vo":
         run = run_odometry(seq, OdometryConfig(**cfg.odometry))
         return run.poses, run
     if cfg.poses.source == "file":
-        path = Path(cfg.poses.file.format(name=seq.name)) if cfg.poses.file else seq.poses_path
-        if path is None:
-            raise SequenceError(seq.root, "has no poses.txt (or poses/XX.txt) for label.poses.source=file")
-        if not path.is_file():
-            raise SequenceError(path, "is missing (label.poses.file)")
-        return read_poses(path, expected_rows=len(seq)), None
+        return read_poses(pose_file(seq, cfg), expected_rows=len(seq)), None
     raise ValueError(f"unknown label.poses.source {cfg.poses.source!r}; valid: {', '.join(POSE_SOURCES)}")
 
 
@@ -90,8 +102,9 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
     matcher = sgbm(cfg.disparity)
     K, size = seq.calibration.K, seq.image_size
+    out_dir.mkdir()  # not parents: a worker must not re-create a stopped run's temporary folder
     for sub in ("label", "disparity"):
-        (out_dir / sub).mkdir(parents=True)
+        (out_dir / sub).mkdir()
 
     reports = []
     for f0, fn in select_segments(positions, cfg.distance_m, cfg.strategy, cfg.stride_m, cfg.min_motion_m):
@@ -131,6 +144,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         "kept": sum(r.kept for r in reports),
         "dropped": sum(not r.kept for r in reports),
         "drift": None,
+        "warnings": [],
     }
     if run is not None:
         (out_dir / "poses_vo.txt").write_text(poses_to_text(poses))
@@ -139,10 +153,20 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         _write_csv(out_dir / "steps.csv", rows, ["from", "to", "ok", "features", "tracked", "inliers", "reason"])
         summary["vo_failed_steps"] = int(run.failed.sum())
         if seq.poses is not None:
-            summary["drift"] = drift(poses, seq.poses, cfg.distance_m)
+            summary["drift"], problem = drift(poses, seq.poses, cfg.distance_m)
+            if problem:
+                summary["warnings"].append(f"no drift figure: {problem}")
+    if not reports:
+        summary["warnings"].append(
+            f"no label: the {'estimated ' if run is not None else ''}path ({travelled[-1]:.1f} m over {len(seq)} frames) never gets "
+            f"{cfg.distance_m:g} m (label.distance_m) from a frame"
+            + (f"; {summary['vo_failed_steps']} of {len(run.steps)} odometry steps failed" if run is not None else "")
+        )
     for r in reports:
         if not r.kept:
             log.warning("%s: dropped segment %d-%d: %s", seq.name, r.f0, r.fn, r.reason)
+    for warning in summary["warnings"]:
+        log.warning("%s: %s", seq.name, warning)
     return summary
 
 

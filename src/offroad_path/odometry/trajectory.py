@@ -38,11 +38,13 @@ def run_odometry(sequence: Sequence, cfg: OdometryConfig | None = None) -> Odome
     return OdometryRun(np.array(poses), steps)
 
 
-def drift(estimate: np.ndarray, reference: np.ndarray, segment_m: float = 20.0) -> dict[str, float] | None:
+def drift(estimate: np.ndarray, reference: np.ndarray, segment_m: float = 20.0) -> tuple[dict[str, float] | None, str | None]:
     """Relative pose error over `segment_m` stretches, with evo (KITTI-style drift).
 
-    Returns translation drift in % of distance travelled and rotation drift in deg/m (means over
-    all segment pairs), or None when the reference path is shorter than one segment.
+    Segments are taken on the ground-truth path (evo's pairs_from_reference), the standard way: taken
+    on the estimate, a VO that overestimates scale would be scored over shorter true stretches.
+    Returns (translation drift in % of distance travelled and rotation drift in deg/m, means over all
+    segment pairs; None) or (None, why there is no figure); it never raises on a short or failed path.
     """
     from evo.core import metrics
     from evo.core.trajectory import PosePath3D
@@ -50,14 +52,17 @@ def drift(estimate: np.ndarray, reference: np.ndarray, segment_m: float = 20.0) 
 
     travelled = np.linalg.norm(np.diff(reference[:, :3, 3], axis=0), axis=1).sum()
     if travelled <= segment_m:
-        return None
+        return None, f"the true path is {travelled:.1f} m, not longer than one {segment_m:g} m segment"
     est, ref = PosePath3D(poses_se3=list(estimate)), PosePath3D(poses_se3=list(reference))
     out = {}
     for name, relation, scale in (
         ("translation_drift_pct", metrics.PoseRelation.translation_part, 100.0 / segment_m),
         ("rotation_drift_deg_per_m", metrics.PoseRelation.rotation_angle_deg, 1.0 / segment_m),
     ):
-        rpe = metrics.RPE(relation, delta=segment_m, delta_unit=Unit.meters, rel_delta_tol=0.1, all_pairs=True)
-        rpe.process_data((ref, est))
+        rpe = metrics.RPE(relation, delta=segment_m, delta_unit=Unit.meters, rel_delta_tol=0.1, all_pairs=True, pairs_from_reference=True)
+        try:
+            rpe.process_data((ref, est))
+        except Exception as e:  # evo's FilterException / MetricsException: no pair of frames fits
+            return None, f"evo found no {segment_m:g} m segment ({e})"
         out[name] = float(rpe.get_statistic(metrics.StatisticsType.mean)) * scale
-    return out
+    return out, None

@@ -1,7 +1,7 @@
 """Check stereo recordings before labelling them: `python -m offroad_path.sequence PATH [PATH ...]`.
 
-Opens every sequence under each PATH with the same validation the label stage uses, decodes its
-first and last frames, and prints one line per sequence. Bad input: one line naming the file, exit 2.
+Opens every sequence under each PATH with the same validation the label stage uses, decodes every
+frame, and prints one line per sequence. Bad input: one line naming the file, exit 2.
 """
 
 from __future__ import annotations
@@ -18,8 +18,12 @@ def describe(path: str) -> list[str]:
     lines = []
     for root in find_sequences(path):
         seq = open_sequence(root)
-        for i in (0, len(seq) - 1):
+        for i in range(len(seq)):  # every frame: a truncated one in the middle must not pass
             seq.load_left(i), seq.load_right(i)
+            if seq.depth is not None:
+                seq.load_depth(i)
+            if seq.semantic is not None:
+                seq.load_semantic(i)
         w, h = seq.image_size
         travelled = "no poses"
         if seq.poses is not None:

@@ -10,3 +10,6 @@ class SequenceError(ValueError):
         self.path = Path(path)
         self.problem = problem
         super().__init__(f"{self.path}: {problem}")
+
+    def __reduce__(self):  # rebuilt from both arguments when it crosses from a worker process
+        return type(self), (self.path, self.problem)

@@ -19,6 +19,7 @@ from offroad_path.sequence.errors import SequenceError
 from offroad_path.sequence.poses import read_poses
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+MAX_IMAGE_PIXELS = 50_000_000  # default cap on an image's declared size (8K is 33 million)
 # (left folder, right folder, calib keys) in order of preference; None keys: two unkeyed rows.
 LAYOUTS = (("image_l", "image_r", None), ("image_2", "image_3", ("P2", "P3")), ("image_0", "image_1", ("P0", "P1")))
 
@@ -97,6 +98,10 @@ def find_sequences(root: str | Path) -> list[Path]:
     if (root / "calib.txt").is_file():
         return [root]
     found = sorted(p.parent for p in root.rglob("calib.txt"))
+    # A folder of left images with no calibration beside it is a recording, not something to skip.
+    for left in sorted(p for layout in LAYOUTS for p in root.rglob(layout[0]) if p.is_dir()):
+        if not (left.parent / "calib.txt").is_file() and left.parent not in found:
+            raise SequenceError(left.parent / "calib.txt", f"is missing: {left.parent} has {left.name}/ but no calibration")
     if not found:
         raise SequenceError(root, "holds no sequence (no calib.txt below it)")
     return found
@@ -147,8 +152,15 @@ def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Pat
     return left, [right_dir / name for name in left_names]
 
 
+def check_pixels(path: Path, width: int, height: int, max_pixels: int = MAX_IMAGE_PIXELS) -> None:
+    """Refuse, from its header, an image too large to decode safely (a decompression bomb)."""
+    if width * height > max_pixels:
+        raise SequenceError(path, f"declares {width}x{height} pixels, more than the {max_pixels:,} allowed; it is not decoded")
+
+
 def _common_size(paths: list[Path]) -> tuple[int, int]:
     size = png_size(paths[0])
+    check_pixels(paths[0], *size)
     for p in paths[1:]:
         if (s := png_size(p)) != size:
             raise SequenceError(p, f"is {s[0]}x{s[1]}, but {paths[0]} is {size[0]}x{size[1]}: every image must have one size")

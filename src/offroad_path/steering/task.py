@@ -13,6 +13,8 @@ from offroad_path.training.task import sgd_with_step_decay
 
 
 class SteeringTask(L.LightningModule):
+    monitor, mode = "val/mae", "min"  # what early stopping and the best checkpoint follow
+
     def __init__(self, width: int = 256, height: int = 136, lr: float = 2e-4, lr_step_epochs: int = 0, lr_gamma: float = 0.1,
                  momentum: float = 0.9, weight_decay: float = 0.0):  # fmt: skip
         super().__init__()

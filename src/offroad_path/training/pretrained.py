@@ -10,6 +10,7 @@ import torch
 from torch import nn
 
 from offroad_path.models import FCN8s, SegmentationNet, SegNet
+from offroad_path.training.checkpoints import CheckpointError, load_checkpoint
 
 CHOICES = ("none", "segmentation", "imagenet")
 
@@ -29,8 +30,8 @@ def from_segmentation(model: SegmentationNet, checkpoint: Path, arch: str, width
     """Load a pretrain-stage checkpoint of the same architecture, then give it `model`'s head."""
     if not checkpoint.is_file():
         raise FileNotFoundError(f"{checkpoint}: no pretraining checkpoint; run `python -m offroad_path.pretrain model={arch}` first")
-    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    hp = saved.get("hyper_parameters", {})
+    saved = load_checkpoint(checkpoint)
+    hp = saved["hyper_parameters"]
     if hp.get("model") != arch or hp.get("width") != width:
         raise ValueError(
             f"{checkpoint}: holds a {hp.get('model')} of width {hp.get('width')}, not the {arch} of width {width} being trained"
@@ -38,7 +39,10 @@ def from_segmentation(model: SegmentationNet, checkpoint: Path, arch: str, width
     state = {k.removeprefix("model."): v for k, v in saved["state_dict"].items() if k.startswith("model.")}
     num_classes = model.num_classes
     model.replace_head(hp["num_classes"])
-    model.load_state_dict(state)
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as e:
+        raise CheckpointError(f"{checkpoint}: its weights do not fit a {arch} ({str(e).strip().splitlines()[0]})") from e
     model.replace_head(num_classes)
     head = set(model.head_parameters())
     return [k for k in state if k not in head]

@@ -1,11 +1,15 @@
 """One training run, shared by the `pretrain` and `train` stages: data, task, pretrained
-initialisation, Lightning trainer with early stopping and checkpoints, MLflow, test, and the
-test-set confidence maps that post-processing reads."""
+initialisation, Lightning trainer with early stopping and resumable checkpoints, MLflow, test, and
+the test-set confidence maps that post-processing reads."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
+import random
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import lightning as L
@@ -20,9 +24,18 @@ from offroad_path.data.datamodule import OffroadDataModule
 from offroad_path.data.dataset import load_sample, transforms
 from offroad_path.data.manifest import prediction_name, write_predictions_manifest
 from offroad_path.labelling.overlay import overlay
+from offroad_path.training.checkpoints import (
+    CONFIG_HASH,
+    AtomicCheckpointIO,
+    CheckpointError,
+    file_digest,
+    load_checkpoint,
+    load_weights,
+    save_weights,
+)
 from offroad_path.training.pretrained import initialise
 from offroad_path.training.task import SegmentationTask
-from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.utils.atomic import MARKER, atomic_directory, check_output_dir, owned
 from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 from offroad_path.world.preview import colour_semantic
 
@@ -70,53 +83,151 @@ def mlflow_logger(cfg: DictConfig, stage: str) -> MLFlowLogger | None:
     return logger
 
 
+class SeedEachEpoch(L.Callback):
+    """Seeds torch, NumPy and random from (seed, epoch) before each training epoch: dropout and
+    anything else drawn from the global generators replays the same after a resume."""
+
+    def __init__(self, seed: int):
+        self.seed = seed
+
+    def on_train_epoch_start(self, trainer: L.Trainer, task: L.LightningModule) -> None:
+        seed_everything_quietly(self.seed * 1_000_003 + trainer.current_epoch)
+
+
+def seed_everything_quietly(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+class StampConfig(L.Callback):
+    """Writes the run's config hash into every checkpoint, so a resume can check it belongs to this run."""
+
+    def __init__(self, key: str):
+        self.key = key
+
+    def on_save_checkpoint(self, trainer: L.Trainer, task: L.LightningModule, checkpoint: dict) -> None:
+        checkpoint[CONFIG_HASH] = self.key
+
+
+# Settings that change how long a run goes on, not what it computes: a longer run resumes a shorter one.
+LENGTH_SETTINGS = {"max_epochs", "fast_dev_run", "log_every_n_steps"}
+
+
+def run_key(cfg: DictConfig, stage: str, target: str, data: OffroadDataModule) -> str:
+    """The identity of a training run: every setting that changes what it computes, and the bytes of
+    its manifests, label masks and pretraining checkpoint (so new data or a new pretraining never
+    resumes an old run). Paths are taken as configured, never resolved."""
+    settings = {
+        "stage": stage, "target": target, "seed": cfg.train.seed,
+        "data": {k: v for k, v in OmegaConf.to_container(cfg.data, resolve=True).items() if k not in ("num_workers", "pin_memory")},
+        "model": OmegaConf.to_container(cfg.model, resolve=True),
+        "pretraining": OmegaConf.to_container(cfg.pretraining, resolve=True) if stage == "train" else None,
+        "trainer": {k: v for k, v in OmegaConf.to_container(cfg.trainer, resolve=True).items() if k not in LENGTH_SETTINGS},
+    }  # fmt: skip
+    digest = hashlib.sha256(json.dumps(settings, sort_keys=True).encode())
+    files = [data.split_dir / f"{name}.csv" for name in ("train", "val", "test")]
+    files += sorted({Path(s.label) for name in ("train", "val") for s in data.samples[name]})
+    if stage == "train" and cfg.pretraining.name != "none":
+        files.append(Path(cfg.pretraining.checkpoint or cfg.pretraining.weights_path or ""))
+    return file_digest(files, digest).hexdigest()[:16]
+
+
+def resume_checkpoint(work: Path, key: str, resume: bool) -> str | None:
+    """The work folder's last.ckpt to resume from, checked; None to start fresh (resume=false
+    clears the folder first). A corrupt or foreign last.ckpt is a CheckpointError naming it."""
+    last = work / "last.ckpt"
+    if not resume:
+        if owned(work):
+            shutil.rmtree(work)
+        return None
+    if not last.is_file():
+        return None
+    try:
+        saved = load_checkpoint(last)
+    except CheckpointError as e:
+        raise CheckpointError(f"{e}; delete it, or set train.resume=false to start this run afresh") from e
+    if saved.get(CONFIG_HASH) != key:
+        raise CheckpointError(
+            f"{last}: belongs to another configuration (hash {saved.get(CONFIG_HASH)} is not {key}); "
+            "set train.resume=false to start this run afresh"
+        )
+    return str(last)
+
+
 def fit(
-    cfg: DictConfig, stage: str, target: str, num_classes: int, out_dir: Path, pretraining: str
-) -> tuple[dict, SegmentationTask, OffroadDataModule]:
-    """Train (resuming from out_dir/checkpoints/last.ckpt when cfg.train.resume) and test the best
-    checkpoint. Returns the metrics (also in out_dir/metrics.json), the task holding the best
-    weights, and the data module."""
+    cfg: DictConfig,
+    stage: str,
+    target: str,
+    num_classes: int,
+    out_dir: Path,
+    pretraining: str,
+    write_more: Callable[[SegmentationTask, OffroadDataModule, Path], None] | None = None,
+) -> dict:
+    """Train, test the best weights, and write out_dir atomically: checkpoints/best.ckpt (weights and
+    hyper-parameters only), metrics.json, and whatever `write_more(task, data, tmp)` adds.
+
+    Lightning's full checkpoints live in a work folder beside out_dir (`.resume/<name>-<hash>`), keyed
+    by the run's config hash: outside the stage's DVC output, so an interrupted run (even under
+    `dvc repro`, which deletes outputs before a stage runs) resumes there when cfg.train.resume, and
+    the resumed run ends exactly as an uninterrupted one (per-epoch seeding and sampling).
+    """
+    inputs = [cfg.data.split_dir] + ([cfg.pretraining.checkpoint] if stage == "train" and cfg.pretraining.checkpoint else [])
+    check_output_dir(out_dir, f"{stage}.out_dir", inputs)
     L.seed_everything(cfg.train.seed, workers=True)
     d, m, t = cfg.data, cfg.model, cfg.trainer
     data = OffroadDataModule(
         d.split_dir, target, d.width, d.height, d.batch_size, d.num_workers, d.pin_memory, d.augment, d.jitter, d.min_scale, cfg.train.seed
     )
+    data.setup()  # every listed file exists, before any training
     task = SegmentationTask(m.name, num_classes, m.width, m.lr, m.lr_step_epochs, m.lr_gamma, m.momentum, m.weight_decay, t.channels_last)
     loaded = initialise(task.model, pretraining, cfg.pretraining, m.name, m.width)
     if loaded:
         log.info("initialised %d parameter tensors from %s pretraining", len(loaded), pretraining)
-    checkpoints = out_dir / "checkpoints"
-    best = ModelCheckpoint(dirpath=checkpoints, filename="best", monitor="val/iou", mode="max", save_last=True)
+    key = run_key(cfg, stage, target, data)
+    work = out_dir.parent / ".resume" / f"{out_dir.name}-{key}"
+    resume = resume_checkpoint(work, key, cfg.train.resume)
+    if not t.fast_dev_run:
+        work.mkdir(parents=True, exist_ok=True)
+        (work / MARKER).write_text(f"{stage} resume\n")
+    if resume:
+        log.info("resuming from %s", resume)
+    best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode, save_last=True)
     logger = mlflow_logger(cfg, stage)
     trainer = L.Trainer(
         max_epochs=t.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
         precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
-        callbacks=[best, EarlyStopping("val/iou", mode="max", patience=t.patience), LogSamples(cfg.train.sample_images)],
-        logger=logger if logger is not None else False, default_root_dir=out_dir, enable_progress_bar=False,
+        callbacks=[best, EarlyStopping(task.monitor, mode=task.mode, patience=t.patience), LogSamples(cfg.train.sample_images),
+                   SeedEachEpoch(cfg.train.seed), StampConfig(key)],
+        plugins=[AtomicCheckpointIO()], logger=logger if logger is not None else False, default_root_dir=work, enable_progress_bar=False,
     )  # fmt: skip
-    resume = checkpoints / "last.ckpt"
-    trainer.fit(task, data, ckpt_path=str(resume) if cfg.train.resume and resume.is_file() else None)
-    best_path = best.best_model_path or None
-    tested = trainer.test(task, data, ckpt_path=best_path, verbose=False)[0]
+    trainer.fit(task, data, ckpt_path=resume, weights_only=True)
+    if best.best_model_path:
+        load_weights(task, best.best_model_path)
+    tested = trainer.test(task, data, verbose=False)[0]
     metrics = {"best_val_iou": float(best.best_model_score) if best.best_model_score is not None else None, "epochs": trainer.current_epoch,
                "global_step": trainer.global_step, **{k: float(v) for k, v in tested.items()}}  # fmt: skip
-    write_text_atomic(out_dir / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    with atomic_directory(out_dir, stage, inputs, key=f"{stage}.out_dir") as tmp:
+        save_weights(tmp / "checkpoints" / "best.ckpt", task, datamodule_hyper_parameters=dict(data.hparams), **{CONFIG_HASH: key})
+        (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        if write_more is not None:
+            write_more(task, data, tmp)
     if logger is not None:
         logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
-        if best_path:
-            logger.experiment.log_artifact(logger.run_id, best_path, "checkpoints")
-    return metrics, task, data
+        logger.experiment.log_artifact(logger.run_id, str(out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
+    return metrics
 
 
-def write_confidence_maps(task: SegmentationTask, data: OffroadDataModule, out_dir: Path) -> int:
+def write_confidence_maps(task: SegmentationTask, data: OffroadDataModule, tmp: Path, final: Path) -> int:
     """Path confidence (softmax of the path class) for every test sample, at the label's size, as
-    float16 .npy under out_dir/<sequence>/NNNNNN[_mirrored].npy, listed in out_dir/manifest.csv."""
-    data.setup("test")
+    float16 .npy under tmp/<sequence>/NNNNNN[_mirrored].npy, listed in tmp/manifest.csv by the path
+    each will have once tmp is renamed to `final`."""
     samples = data.samples["test"]
     transform = transforms(data.hparams.width, data.hparams.height, augment=False)
     task.eval()
     rows = []
-    with atomic_directory(out_dir) as tmp, torch.no_grad():
+    tmp.mkdir()
+    with torch.no_grad():
         for sample in samples:
             image, label = load_sample(sample, "path")
             scores = task(transform(image=image)["image"][None].to(task.device))
@@ -124,6 +235,6 @@ def write_confidence_maps(task: SegmentationTask, data: OffroadDataModule, out_d
             name = prediction_name(sample)
             (tmp / sample.sequence).mkdir(exist_ok=True)
             np.save(tmp / name, confidence.cpu().numpy().astype(np.float16))
-            rows.append((sample, str(out_dir / name)))
+            rows.append((sample, str(final / name)))
         write_predictions_manifest(tmp / "manifest.csv", rows)
     return len(rows)

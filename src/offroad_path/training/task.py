@@ -20,6 +20,8 @@ from offroad_path.models import build_model
 
 
 class SegmentationTask(L.LightningModule):
+    monitor, mode = "val/iou", "max"  # what early stopping and the best checkpoint follow
+
     def __init__(
         self,
         model: str,

@@ -1,5 +1,8 @@
-"""Atomic outputs: a stage writes into a temporary sibling and renames it into place at the end,
-so an interrupted or failed run never leaves a partial output where the next stage would read it."""
+"""Outputs that are safe to write: a stage writes into a temporary sibling and renames it into place
+at the end, so an interrupted or failed run never leaves a partial output where the next stage would
+read it; and it only ever replaces a folder that this project made (a marker file inside it), never
+one of the user's, and never one of its own inputs.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +10,15 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+MARKER = ".offroad-path-output"  # inside every folder the project wrote; its text names the stage
 _UNFINISHED: set[Path] = set()  # temporary folders of this process's outputs still being written
+
+
+class UnsafeOutputError(ValueError):
+    """An output location that would delete or overwrite something the project did not make."""
 
 
 def remove_unfinished() -> None:
@@ -19,13 +27,69 @@ def remove_unfinished() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-@contextlib.contextmanager
-def atomic_directory(target: str | Path) -> Iterator[Path]:
-    """Yield an empty temporary directory that replaces `target` completely on success."""
+def _related(a: Path, b: Path) -> bool:
+    return a == b or a.is_relative_to(b) or b.is_relative_to(a)
+
+
+def check_output_dir(target: str | Path, key: str, inputs: Iterable[str | Path] = ()) -> None:
+    """Refuse, before any work, an output folder that is, holds or lies inside an input, or that
+    exists with content but was not made by this project. `key` names the setting, for the message."""
     target = Path(target)
+    resolved = target.resolve()
+    for source in inputs:
+        if source is not None and _related(resolved, Path(source).resolve()):
+            raise UnsafeOutputError(f"{key}={target}: overlaps the input {source}; writing there would delete it. Choose another {key}")
+    if target.is_symlink() or (target.exists() and not target.is_dir()):
+        raise UnsafeOutputError(f"{key}={target}: exists and is not a folder; it is left as it is. Choose another {key}")
+    if target.is_dir() and not (target / MARKER).is_file() and any(target.iterdir()):
+        raise UnsafeOutputError(
+            f"{key}={target}: a folder this project did not write (no {MARKER} inside) is not replaced. "
+            f"Choose another {key}, or empty or remove it yourself"
+        )
+
+
+def owned(folder: Path) -> bool:
+    return folder.is_dir() and not folder.is_symlink() and (folder / MARKER).is_file()
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_siblings(target: Path) -> list[Path]:
+    """Temporary folders beside target left by a killed run (its process is gone): removed."""
+    removed = []
+    if not target.parent.is_dir():
+        return removed
+    for sibling in target.parent.glob(f".{target.name}.*-*"):
+        kind, _, rest = sibling.name.removeprefix(f".{target.name}.").partition("-")
+        pid = rest.split("-")[0]
+        if kind in ("tmp", "old") and pid.isdigit() and owned(sibling) and not _pid_alive(int(pid)):
+            shutil.rmtree(sibling, ignore_errors=True)
+            removed.append(sibling)
+    return removed
+
+
+@contextlib.contextmanager
+def atomic_directory(target: str | Path, stage: str, inputs: Iterable[str | Path] = (), key: str | None = None) -> Iterator[Path]:
+    """Yield an empty temporary directory that replaces `target` completely on success.
+
+    `stage` is written into the marker; `inputs` are folders target must not overlap; `key` is the
+    config key of target, for messages (default: the stage's name).
+    """
+    target = Path(target)
+    check_output_dir(target, key or stage, inputs)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    remove_stale_siblings(target)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-{os.getpid()}-", dir=target.parent))
     tmp.chmod(0o755)
+    (tmp / MARKER).write_text(f"{stage}\n")
     _UNFINISHED.add(tmp)
     try:
         yield tmp
@@ -36,6 +100,7 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
         _UNFINISHED.discard(tmp)
     old = target.parent / f".{target.name}.old-{os.getpid()}"
     if target.exists():
+        check_output_dir(target, key or stage)  # nothing of the user's appeared there meanwhile
         os.replace(target, old)
     os.replace(tmp, target)
     shutil.rmtree(old, ignore_errors=True)
@@ -43,8 +108,13 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
 
 def write_text_atomic(path: str | Path, text: str) -> None:
     path = Path(path)
+    if path.is_dir():
+        raise UnsafeOutputError(f"{path}: is a folder; a file was expected here and the folder is left as it is")
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)

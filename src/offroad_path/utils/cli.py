@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import multiprocessing
 import os
 import signal
 import sys
@@ -18,6 +17,7 @@ from omegaconf.errors import MissingMandatoryValue
 
 from offroad_path.sequence.errors import SequenceError
 from offroad_path.utils.atomic import remove_unfinished
+from offroad_path.utils.parallel import stop_workers
 
 log = logging.getLogger("offroad_path")
 
@@ -39,14 +39,11 @@ def clear_errors() -> Iterator[None]:
 
 def _stop(signum: int, frame: Any) -> None:
     """On SIGTERM: stop the worker processes, delete unfinished outputs, exit 128 + signal.
+    Training keeps its resume checkpoints (they are not unfinished outputs).
 
     Done here rather than by raising SystemExit, which Python drops when the signal lands while
     the main thread runs a finaliser (seen once in CI: the stage then ran on to the end)."""
-    children = multiprocessing.active_children()
-    for child in children:
-        child.terminate()
-    for child in children:
-        child.join(timeout=5)
+    stop_workers()  # the pools first, so that none starts a replacement worker; then wait for them
     remove_unfinished()
     os._exit(128 + signum)
 
@@ -57,7 +54,7 @@ CONF_DIR = Path(__file__).resolve().parents[3] / "conf"
 def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
     """The Hydra entry point of a stage: the project's config, typed by its schemas, and clear
     errors on bad input."""
-    from offroad_path.config import register_configs
+    from offroad_path.config import register_configs, validate_config
 
     register_configs()
 
@@ -67,6 +64,7 @@ def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
         # instead of leaving them beside the outputs.
         signal.signal(signal.SIGTERM, _stop)
         with clear_errors():
+            validate_config(cfg)
             stage(cfg)
 
     return main

@@ -1,0 +1,81 @@
+"""Checkpoints that are safe to load and say nothing about where the project lives.
+
+Every load is `torch.load(..., weights_only=True)`: a crafted file cannot run code. The checkpoints a
+stage publishes (`best.ckpt`) hold only the weights and the plain values needed to rebuild the network,
+so they hash the same in any checkout; Lightning's full checkpoints (optimizer, loops, callbacks with
+absolute paths) stay in the resume folder, outside the stage's outputs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import torch
+from lightning.fabric.plugins import TorchCheckpointIO
+
+CONFIG_HASH = "offroad_path_config_hash"  # checkpoint key: the run's identity, see training.run.run_key
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that is missing, corrupt, unsafe or of another network or task."""
+
+
+def load_checkpoint(path: str | Path) -> dict[str, Any]:
+    """A checkpoint as a dict of tensors and plain values; CheckpointError names the file otherwise."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint")
+    try:
+        saved = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:  # what weights_only raises on anything but tensors and plain values
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise CheckpointError(f"{path}: refused, it holds objects that could run code when loaded ({first})") from e
+    except Exception as e:  # truncated zip, not a torch file at all, ...
+        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {e})") from e
+    if not isinstance(saved, dict) or not isinstance(saved.get("state_dict"), dict) or not isinstance(saved.get("hyper_parameters"), dict):
+        raise CheckpointError(f"{path}: not a checkpoint of this project (no state_dict and hyper_parameters)")
+    return saved
+
+
+def save_weights(path: Path, task: L.LightningModule, **extra: Any) -> None:
+    """The published checkpoint: weights, the task's hyper-parameters and `extra` plain values."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({"state_dict": task.state_dict(), "hyper_parameters": dict(task.hparams), **extra}, path)
+
+
+def load_weights(task: L.LightningModule, path: str | Path, saved: dict[str, Any] | None = None) -> None:
+    """Load a checkpoint's weights into `task`; a checkpoint of another network is a CheckpointError."""
+    saved = saved if saved is not None else load_checkpoint(path)
+    try:
+        task.load_state_dict(saved["state_dict"])
+    except RuntimeError as e:
+        problem = str(e).strip().splitlines()[0]
+        raise CheckpointError(f"{path}: its weights do not fit this network ({problem})") from e
+
+
+def file_digest(paths: list[Path], into: Any = None) -> Any:
+    """sha256 over the bytes of `paths` in order (a missing path counts as empty)."""
+    digest = into if into is not None else hashlib.sha256()
+    for p in paths:
+        digest.update(str(p.name).encode())
+        if p.is_file():
+            digest.update(p.read_bytes())
+    return digest
+
+
+class AtomicCheckpointIO(TorchCheckpointIO):
+    """Lightning's checkpoint writer, but a kill during a save leaves the previous file whole."""
+
+    def save_checkpoint(self, checkpoint: dict[str, Any], path: str | os.PathLike, storage_options: Any = None) -> None:
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        try:
+            super().save_checkpoint(checkpoint, tmp, storage_options)
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)

@@ -1,0 +1,75 @@
+"""Value rules for config schemas: `field(default=..., metadata=positive())`, checked by `validate`
+before a stage does any work, with a message that names the key."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import MissingMandatoryValue
+
+
+class ConfigValueError(ValueError):
+    pass
+
+
+@dataclasses.dataclass(frozen=True)
+class Rule:
+    test: Callable[[Any], bool]
+    says: str
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def rule(test: Callable[[float], bool], says: str) -> dict:
+    """A rule on a finite number (NaN and infinity never pass)."""
+    return {"rule": Rule(lambda v: _number(v) and test(v), says)}
+
+
+def positive() -> dict:
+    return rule(lambda v: v > 0, "must be a number > 0")
+
+
+def at_least(low: float) -> dict:
+    return rule(lambda v: v >= low, f"must be a number >= {low:g}")
+
+
+def between(low: float, high: float, low_open: bool = False, high_open: bool = False) -> dict:
+    lo, hi = "(" if low_open else "[", ")" if high_open else "]"
+    return rule(
+        lambda v: (v > low if low_open else v >= low) and (v < high if high_open else v <= high),
+        f"must be a number in {lo}{low:g}, {high:g}{hi}",
+    )
+
+
+def one_of(choices: Iterable[str] | Callable[[], Iterable[str]]) -> dict:
+    """A choice; `choices` may be a callable so that a registry is read only when checking."""
+
+    def valid() -> list[str]:
+        return sorted(choices() if callable(choices) else choices)
+
+    return {"rule": Rule(lambda v: v in valid(), "")} | {"choices": valid}
+
+
+def validate(cfg: DictConfig, schema: type, prefix: str = "") -> None:
+    """Check every value of `cfg` that has a rule in the dataclass `schema`, recursively; values left
+    unset (`???`) or None are skipped. Raises ConfigValueError naming the first bad key."""
+    for f in dataclasses.fields(schema):
+        key = f"{prefix}{f.name}"
+        try:
+            value = OmegaConf.select(cfg, f.name, throw_on_missing=True)
+        except MissingMandatoryValue:
+            continue
+        if f.default_factory is not dataclasses.MISSING and dataclasses.is_dataclass(nested := f.default_factory()):
+            if isinstance(value, DictConfig):
+                validate(value, type(nested), f"{key}.")
+            continue
+        check = f.metadata.get("rule")
+        if check is not None and value is not None and not check.test(value):
+            says = check.says or f"must be one of: {', '.join(f.metadata['choices']())}"
+            raise ConfigValueError(f"{key}={value!r}: {says}")
