@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import sqlite3
 from collections.abc import Callable
 from pathlib import Path
 
@@ -90,3 +91,15 @@ def tiny_config(compose_config, split_dir) -> Callable[..., DictConfig]:
         )  # fmt: skip
 
     return _compose
+
+
+@pytest.fixture(scope="session")
+def trained(tiny_config, tmp_path_factory) -> tuple[Path, str, Path]:
+    """(checkpoint, MLflow run id, tracking db) of a U-Net trained for one epoch on the test drive."""
+    from offroad_path.train import train
+
+    out = tmp_path_factory.mktemp("trained")
+    train(tiny_config(out, "model=unet", "trainer.max_epochs=1"))
+    with sqlite3.connect(out / "mlflow.db") as db:
+        (run_id,) = db.execute("select run_uuid from runs where name = 'train unet-none'").fetchone()
+    return out / "run" / "checkpoints" / "best.ckpt", run_id, out / "mlflow.db"

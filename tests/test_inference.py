@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import shutil
-import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -20,17 +19,6 @@ from offroad_path.labelling.disparity import compute_disparity, depth_from_dispa
 from offroad_path.models import MODELS, build_model
 from offroad_path.predict import run_predict
 from offroad_path.sequence.reader import open_sequence
-from offroad_path.train import train
-
-
-@pytest.fixture(scope="module")
-def trained(tiny_config, tmp_path_factory) -> tuple[Path, str, Path]:
-    """(checkpoint, MLflow run id, tracking db) of a U-Net trained for one epoch on the test drive."""
-    out = tmp_path_factory.mktemp("trained")
-    train(tiny_config(out, "model=unet", "trainer.max_epochs=1"))
-    with sqlite3.connect(out / "mlflow.db") as db:
-        (run_id,) = db.execute("select run_uuid from runs where name = 'train unet-none'").fetchone()
-    return out / "run" / "checkpoints" / "best.ckpt", run_id, out / "mlflow.db"
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from offroad_path.labelling.disparity import compute_disparity, depth_from_disparity, sgbm
-from offroad_path.sequence.reader import MAX_IMAGE_PIXELS, check_pixels, open_sequence
+from offroad_path.sequence.reader import MAX_IMAGE_PIXELS, check_pixels, open_sequence, png_size
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 
@@ -47,6 +47,9 @@ def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = N
 def image_size(path: Path) -> tuple[int, int]:
     """(width, height) from an image file's header, without decoding its pixels."""
     from PIL import Image
+
+    if path.suffix.lower() == ".png":
+        return png_size(path)
 
     try:
         with Image.open(path) as image:

@@ -48,13 +48,23 @@ def _stop(signum: int, frame: Any) -> None:
     os._exit(128 + signum)
 
 
+def run_stage(stage: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
+    """What a stage's command does with its composed config: check every value against the schemas'
+    rules, run, and turn bad input into one line and exit status 2."""
+    from offroad_path.config import validate_config
+
+    with clear_errors():
+        validate_config(cfg)
+        return stage(cfg)
+
+
 CONF_DIR = Path(__file__).resolve().parents[3] / "conf"
 
 
 def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
     """The Hydra entry point of a stage: the project's config, typed by its schemas, and clear
     errors on bad input."""
-    from offroad_path.config import register_configs, validate_config
+    from offroad_path.config import register_configs
 
     register_configs()
 
@@ -63,8 +73,6 @@ def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
         # A stop (kill, `dvc` interrupted) deletes the temporary folders of unfinished outputs
         # instead of leaving them beside the outputs.
         signal.signal(signal.SIGTERM, _stop)
-        with clear_errors():
-            validate_config(cfg)
-            stage(cfg)
+        run_stage(stage, cfg)
 
     return main
