@@ -110,7 +110,9 @@ def test_postprocess_into_its_predictions(compose_config, trained, tmp_path, cap
 
 def test_evaluate_into_a_users_folder(compose_config, split_dir, tmp_path, capsys):
     out = user_folder(tmp_path / "results")
-    cfg = compose_config(f"evaluate.out_dir={out}", f"evaluate.runs_dir={tmp_path / 'runs'}", f"evaluate.train_manifest={split_dir / 'train.csv'}")
+    cfg = compose_config(
+        f"evaluate.out_dir={out}", f"evaluate.runs_dir={tmp_path / 'runs'}", f"evaluate.train_manifest={split_dir / 'train.csv'}"
+    )
     refused(evaluate, cfg, capsys, tmp_path, "evaluate.out_dir", "did not write")
 
 

@@ -1,0 +1,135 @@
+"""Stages killed at several points (SIGKILL and SIGTERM), then run again: the outputs are byte for byte
+those of an uninterrupted run, no process of the killed run is left, no temporary folder either."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def files(root: Path) -> dict[str, str]:
+    """Hash of every file under root; paths of root inside a file (manifests) count as the same."""
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes().replace(str(root).encode(), b"<out>")).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+def tagged_processes(tag: str) -> list[int]:
+    """Live processes started by a run with OFFROAD_TEST_TAG=tag (workers inherit the environment)."""
+    found = []
+    for environ in Path("/proc").glob("[0-9]*/environ"):
+        try:
+            if f"OFFROAD_TEST_TAG={tag}".encode() in environ.read_bytes().split(b"\0"):
+                state = (environ.parent / "stat").read_text().split(")")[-1].split()[0]
+                if state != "Z":
+                    found.append(int(environ.parent.name))
+        except OSError:
+            continue
+    return found
+
+
+def start(args: list[str], tag: str) -> subprocess.Popen:
+    env = {**os.environ, "OFFROAD_TEST_TAG": tag}
+    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def finish(args: list[str]) -> None:
+    run = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr[-3000:]
+
+
+def interrupt(args: list[str], how: signal.Signals, after_s: float, ready: Callable[[], bool] = lambda: True) -> float:
+    """Start the command, wait until ready() and then after_s, send `how`, and check that the run and
+    every process it started are gone."""
+    tag = uuid.uuid4().hex
+    began = time.monotonic()
+    process = start(args, tag)
+    deadline = time.monotonic() + 300
+    while not ready() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(after_s)
+    assert process.poll() is None, f"the run ended before the signal, {time.monotonic() - began:.1f} s in: the test missed its point"
+    process.send_signal(how)
+    process.wait(timeout=120)
+    deadline = time.monotonic() + 10
+    while tagged_processes(tag) and time.monotonic() < deadline:  # SIGKILL'd parents' workers get SIGKILL from the kernel
+        time.sleep(0.1)
+    assert not tagged_processes(tag), "a process of the stopped run is still alive"
+    return time.monotonic() - began
+
+
+@pytest.fixture(scope="module")
+def two_drives(drive, tmp_path_factory) -> Path:
+    recordings = tmp_path_factory.mktemp("two") / "recordings"
+    shutil.copytree(drive / "drive", recordings / "a")
+    shutil.copytree(drive / "drive", recordings / "b")
+    return recordings
+
+
+@pytest.mark.slow
+def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_drives, tmp_path):
+    def args(out: Path) -> list[str]:
+        return ["offroad_path.label", f"label.in_dir={two_drives}", f"label.out_dir={out / 'labels'}",
+                f"label.metrics_path={out / 'm.json'}", "label.workers=2", "mlflow.enabled=false"]  # fmt: skip
+
+    reference = tmp_path / "reference"
+    began = time.monotonic()
+    finish(args(reference))
+    duration = time.monotonic() - began
+    expected = files(reference)
+    points = random.Random(0)
+    for i, how in enumerate([signal.SIGKILL, signal.SIGKILL, signal.SIGTERM, signal.SIGTERM]):
+        out = tmp_path / f"run{i}"
+        interrupt(args(out), how, points.uniform(0.3, 0.9) * duration)
+        if how == signal.SIGTERM:  # a stopped stage cleans up after itself
+            assert not list(out.glob(".labels*"))
+        finish(args(out))
+        assert files(out) == expected
+        assert not list(out.glob(".labels*"))  # a killed run's temporary folder is gone after the next run
+
+
+def saved_epochs(out: Path) -> int:
+    """Epochs a run under `out` has in its resume checkpoint so far (0 before the first)."""
+    for last in out.glob(".resume/run-*/last.ckpt"):
+        try:
+            return int(torch.load(last, map_location="cpu", weights_only=True)["epoch"]) + 1
+        except Exception:  # being replaced this very moment
+            return 0
+    return 0
+
+
+@pytest.mark.slow
+def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(split_dir, tiny_overrides, tmp_path):
+    def args(out: Path) -> list[str]:
+        return ["offroad_path.train", *tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={out / 'run'}", "model=unet",
+                "trainer.max_epochs=10", "trainer.patience=10", "mlflow.enabled=false"]  # fmt: skip
+
+    reference = tmp_path / "reference"
+    finish(args(reference))
+    expected = files(reference / "run")
+    assert json.loads((reference / "run" / "metrics.json").read_text())["global_step"] > 0
+    # (signal, epochs saved before it, then a delay): before any checkpoint, and mid-way through later epochs
+    points = [(signal.SIGKILL, 0, 2.0), (signal.SIGKILL, 1, 0.0), (signal.SIGTERM, 3, 0.0), (signal.SIGKILL, 5, 0.05)]
+    for i, (how, epochs, delay) in enumerate(points):
+        out = tmp_path / f"run{i}"
+        interrupt(args(out), how, delay, ready=lambda out=out, epochs=epochs: saved_epochs(out) >= epochs)
+        assert not (out / "run").exists()  # nothing is published before the run ends
+        finish(args(out))
+        assert files(out / "run") == expected
