@@ -47,7 +47,7 @@ def tagged_processes(tag: str) -> list[int]:
 
 def start(args: list[str], tag: str) -> subprocess.Popen:
     env = {**os.environ, "OFFROAD_TEST_TAG": tag}
-    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 def finish(args: list[str]) -> None:

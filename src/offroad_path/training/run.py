@@ -9,6 +9,7 @@ import json
 import logging
 import random
 import shutil
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -190,14 +191,17 @@ def fit(
     if not t.fast_dev_run:
         work.mkdir(parents=True, exist_ok=True)
         (work / MARKER).write_text(f"{stage} resume\n")
+        warnings.filterwarnings("ignore", message="Checkpoint directory .* exists and is not empty")  # the marker, or a resume
     if resume:
         log.info("resuming from %s", resume)
-    best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode, save_last=True)
+    best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
+    # Lightning's save_last writes only when the best changes; a resume wants every epoch's end.
+    latest = ModelCheckpoint(dirpath=work, filename="last", enable_version_counter=False)
     logger = mlflow_logger(cfg, stage)
     trainer = L.Trainer(
         max_epochs=t.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
         precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
-        callbacks=[best, EarlyStopping(task.monitor, mode=task.mode, patience=t.patience), LogSamples(cfg.train.sample_images),
+        callbacks=[best, latest, EarlyStopping(task.monitor, mode=task.mode, patience=t.patience), LogSamples(cfg.train.sample_images),
                    SeedEachEpoch(cfg.train.seed), StampConfig(key)],
         plugins=[AtomicCheckpointIO()], logger=logger if logger is not None else False, default_root_dir=work, enable_progress_bar=False,
     )  # fmt: skip
