@@ -40,7 +40,11 @@ def dvc(repo: Path, *args: str) -> str:
 
 @pytest.fixture
 def repo_copy(tmp_path) -> Path:
-    repo = tmp_path / "repo"
+    return tiny_repo(tmp_path / "repo")
+
+
+def tiny_repo(repo: Path) -> Path:
+    """The project's pipeline in a fresh git + DVC repo at `repo`, on a tiny preset."""
     for item in ("conf", "src", "dvc.yaml", ".dvcignore"):
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
     laptop = repo / "conf" / "experiment" / "laptop.yaml"
@@ -71,6 +75,10 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     }
     stages |= {f"postprocess@{m}-{p}" for m in MODELS for p in ("none", "segmentation")}
     assert ran == stages
+    # A fresh clone elsewhere, deeper, reproduces every hash of dvc.lock: no output depends on the path.
+    elsewhere = tiny_repo(repo_copy.parent / "another" / "place" / "repo")
+    dvc(elsewhere, "repro")
+    assert (elsewhere / "dvc.lock").read_text() == (repo_copy / "dvc.lock").read_text()
     assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2
     assert json.loads((repo_copy / "metrics" / "label.json").read_text())["labels"] > 0
     for model in MODELS:
