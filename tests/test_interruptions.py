@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from processes import tagged_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,20 +30,6 @@ def files(root: Path) -> dict[str, str]:
         for p in sorted(root.rglob("*"))
         if p.is_file()
     }
-
-
-def tagged_processes(tag: str) -> list[int]:
-    """Live processes started by a run with OFFROAD_TEST_TAG=tag (workers inherit the environment)."""
-    found = []
-    for environ in Path("/proc").glob("[0-9]*/environ"):
-        try:
-            if f"OFFROAD_TEST_TAG={tag}".encode() in environ.read_bytes().split(b"\0"):
-                state = (environ.parent / "stat").read_text().split(")")[-1].split()[0]
-                if state != "Z":
-                    found.append(int(environ.parent.name))
-        except OSError:
-            continue
-    return found
 
 
 def start(args: list[str], tag: str) -> subprocess.Popen:

@@ -10,6 +10,7 @@ import pickle
 import shutil
 import subprocess
 import sys
+import uuid
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -18,6 +19,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from processes import tagged_processes
 
 from offroad_path.evaluate import evaluate
 from offroad_path.export import run_export
@@ -140,6 +142,13 @@ def test_a_stale_temporary_folder_of_a_killed_run_is_removed(compose_config, rec
     assert not stale.exists() and (tmp_path / "labels" / MARKER).read_text() == "label\n"
 
 
+@pytest.mark.parametrize("name", ["notes.txt", "models"])
+def test_export_never_replaces_a_file_or_folder_that_is_not_onnx(compose_config, trained, tmp_path, capsys, name):
+    target = tmp_path / name
+    target.write_text("mine") if name.endswith(".txt") else user_folder(target)
+    refused(run_export, compose_config(f"export.checkpoint={trained[0]}", f"export.out={target}"), capsys, tmp_path, "export.out", ".onnx")
+
+
 # -- 2. Checkpoints: weights only, and a clear line for anything else ------------------------------
 
 
@@ -252,24 +261,12 @@ def test_a_worker_error_reaches_the_parent_instead_of_hanging(recordings, tmp_pa
     before = snapshot(tmp_path)
     cli = [sys.executable, "-m", "offroad_path.label", f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'labels'}",
            f"label.metrics_path={tmp_path / 'm.json'}", "label.workers=2", "mlflow.enabled=false"]  # fmt: skip
-    run = subprocess.run(cli, capture_output=True, text=True, timeout=300)
+    tag = uuid.uuid4().hex
+    run = subprocess.run(cli, capture_output=True, text=True, timeout=300, env={**os.environ, "OFFROAD_TEST_TAG": tag})
     assert run.returncode == 2, run.stderr
     assert run.stderr.strip().splitlines()[-1] == f"error: {frame}: cannot be decoded as an image"
     assert snapshot(tmp_path) == before
-    assert not children_of_pid(os.getpid()) - {os.getpid()}
-
-
-def children_of_pid(pid: int) -> set[int]:
-    """Processes whose parent is pid (from /proc): a stage's workers would show here if orphaned to us."""
-    found = set()
-    for status in Path("/proc").glob("[0-9]*/status"):
-        try:
-            fields = dict(line.split(":\t", 1) for line in status.read_text().splitlines() if ":\t" in line)
-        except OSError:
-            continue
-        if fields.get("PPid", "").strip() == str(pid) and "python" in fields.get("Name", ""):
-            found.add(int(status.parent.name))
-    return found
+    assert not tagged_processes(tag)  # the other worker was stopped, not orphaned
 
 
 @pytest.mark.parametrize(

@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 
 from offroad_path.inference.export import export_onnx
 from offroad_path.inference.runners import TorchModel
+from offroad_path.utils.atomic import UnsafeOutputError
 from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.export")
@@ -25,8 +26,10 @@ log = logging.getLogger("offroad_path.export")
 
 def run_export(cfg: DictConfig) -> float:
     e = cfg.export
-    model = TorchModel(e.checkpoint)
     out = Path(e.out)
+    if out.suffix != ".onnx" or out.is_dir() or out.resolve() == Path(e.checkpoint).resolve():
+        raise UnsafeOutputError(f"export.out={out}: must be a .onnx file path (not a folder, not the checkpoint); nothing is replaced")
+    model = TorchModel(e.checkpoint)
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.tmp-", suffix=".onnx", dir=out.parent)
     os.close(fd)
