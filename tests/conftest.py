@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import shutil
 import sqlite3
 from collections.abc import Callable
 from pathlib import Path
@@ -103,3 +104,19 @@ def trained(tiny_config, tmp_path_factory) -> tuple[Path, str, Path]:
     with sqlite3.connect(out / "mlflow.db") as db:
         (run_id,) = db.execute("select run_uuid from runs where name = 'train unet-none'").fetchone()
     return out / "run" / "checkpoints" / "best.ckpt", run_id, out / "mlflow.db"
+
+
+@pytest.fixture
+def recordings(drive, tmp_path) -> Path:
+    """A copy of the test drive the case may damage."""
+    shutil.copytree(drive, tmp_path / "recordings")
+    return tmp_path / "recordings"
+
+
+@pytest.fixture
+def frames_folder(drive, tmp_path) -> Path:
+    folder = tmp_path / "images"
+    folder.mkdir()
+    for i in range(2):
+        shutil.copy(drive / "drive" / "image_l" / f"{i:06d}.png", folder / f"{i:06d}.png")
+    return folder

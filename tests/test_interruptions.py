@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from processes import tagged_processes
+from helpers import tagged_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,0 +1,189 @@
+"""Careless use and crafted files: outputs pointed at inputs or at the user's folders, and
+checkpoints that are unsafe, corrupt or foreign. Each case exits 2 with one line naming the file or
+the key, and leaves every file under the test's folder as it was (hashed before and after)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+from helpers import label_cfg, refused, user_folder
+
+from offroad_path.evaluate import evaluate
+from offroad_path.export import run_export
+from offroad_path.label import label
+from offroad_path.postprocess import run_postprocess
+from offroad_path.predict import run_predict
+from offroad_path.split import split
+from offroad_path.synthesize import synthesize
+from offroad_path.train import train
+from offroad_path.utils.atomic import MARKER
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# -- 1. Outputs never replace an input or a folder the project did not make ----------------------
+
+
+@pytest.mark.parametrize("where", ["same", "inside", "around"])
+def test_label_out_dir_overlapping_its_input(compose_config, recordings, tmp_path, capsys, where):
+    out = {"same": recordings, "inside": recordings / "drive" / "labels", "around": tmp_path}[where]
+    cfg = label_cfg(compose_config, recordings, tmp_path, f"label.out_dir={out}")
+    refused(label, cfg, capsys, tmp_path, "label.out_dir", "overlaps the input")
+
+
+def test_label_out_dir_that_is_a_file(compose_config, recordings, tmp_path, capsys):
+    (tmp_path / "labels").write_text("a file")
+    refused(label, label_cfg(compose_config, recordings, tmp_path), capsys, tmp_path, "label.out_dir", "not a folder")
+
+
+def test_synthesize_into_a_users_folder(compose_config, tmp_path, capsys):
+    out = user_folder(tmp_path / "mine")
+    cfg = compose_config(f"synthesize.out_dir={out}", "synthesize.sequences=1", "world.frames=2")
+    refused(synthesize, cfg, capsys, tmp_path, "synthesize.out_dir", "did not write")
+
+
+def test_split_into_its_labels(compose_config, labelled_drive, tmp_path, capsys):
+    cfg = compose_config(f"split.labels_dir={labelled_drive}", f"split.out_dir={labelled_drive}")
+    refused(split, cfg, capsys, labelled_drive, "split.out_dir", "overlaps the input")
+
+
+def test_train_into_a_users_folder_before_any_training(tiny_config, tmp_path, capsys):
+    out = user_folder(tmp_path / "run")
+    refused(train, tiny_config(tmp_path, "mlflow.enabled=false"), capsys, tmp_path, f"train.out_dir={out}", "did not write")
+
+
+def test_postprocess_into_its_predictions(compose_config, trained, tmp_path, capsys):
+    predictions = trained[0].parents[1] / "predictions"
+    cfg = compose_config(f"postprocess.predictions_dir={predictions}", f"postprocess.out_dir={predictions}")
+    refused(run_postprocess, cfg, capsys, predictions, "postprocess.out_dir", "overlaps the input")
+
+
+def test_evaluate_into_a_users_folder(compose_config, split_dir, tmp_path, capsys):
+    out = user_folder(tmp_path / "results")
+    cfg = compose_config(
+        f"evaluate.out_dir={out}", f"evaluate.runs_dir={tmp_path / 'runs'}", f"evaluate.train_manifest={split_dir / 'train.csv'}"
+    )
+    refused(evaluate, cfg, capsys, tmp_path, "evaluate.out_dir", "did not write")
+
+
+@pytest.mark.parametrize("where", ["input", "users"])
+def test_predict_into_its_input_or_a_users_folder(compose_config, trained, frames_folder, tmp_path, capsys, where):
+    out = frames_folder if where == "input" else user_folder(tmp_path / "mine")
+    cfg = compose_config(f"predict.checkpoint={trained[0]}", f"predict.input={frames_folder}", f"predict.out_dir={out}")
+    refused(run_predict, cfg, capsys, tmp_path, "predict.out_dir", "overlaps the input" if where == "input" else "did not write")
+
+
+def test_a_stale_temporary_folder_of_a_killed_run_is_removed(compose_config, recordings, tmp_path):
+    stale = tmp_path / ".labels.tmp-999999999-abc"  # no such process
+    stale.mkdir()
+    (stale / MARKER).write_text("label\n")
+    label(label_cfg(compose_config, recordings, tmp_path))
+    assert not stale.exists() and (tmp_path / "labels" / MARKER).read_text() == "label\n"
+
+
+@pytest.mark.parametrize("name", ["notes.txt", "models"])
+def test_export_never_replaces_a_file_or_folder_that_is_not_onnx(compose_config, trained, tmp_path, capsys, name):
+    target = tmp_path / name
+    target.write_text("mine") if name.endswith(".txt") else user_folder(target)
+    refused(run_export, compose_config(f"export.checkpoint={trained[0]}", f"export.out={target}"), capsys, tmp_path, "export.out", ".onnx")
+
+
+# -- 2. Checkpoints: weights only, and a clear line for anything else ------------------------------
+
+
+class RunsCode:
+    """Unpickling this runs a shell command: what a crafted checkpoint would do."""
+
+    def __init__(self, sentinel: Path):
+        self.sentinel = sentinel
+
+    def __reduce__(self):
+        return os.system, (f"touch {self.sentinel}",)
+
+
+def crafted_checkpoint(path: Path, trained_checkpoint: Path) -> Path:
+    saved = torch.load(trained_checkpoint, weights_only=True)
+    saved["hyper_parameters"]["payload"] = RunsCode(path.parent / "pwned")
+    torch.save(saved, path)
+    return path
+
+
+def test_predict_refuses_a_checkpoint_that_would_run_code(compose_config, trained, frames_folder, tmp_path, capsys):
+    bad = crafted_checkpoint(tmp_path / "bad.ckpt", trained[0])
+    cfg = compose_config(f"predict.checkpoint={bad}", f"predict.input={frames_folder}", f"predict.out_dir={tmp_path / 'out'}")
+    refused(run_predict, cfg, capsys, tmp_path, bad, "refused")
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_export_refuses_a_checkpoint_that_would_run_code(compose_config, trained, tmp_path, capsys):
+    bad = crafted_checkpoint(tmp_path / "bad.ckpt", trained[0])
+    refused(run_export, compose_config(f"export.checkpoint={bad}", f"export.out={tmp_path / 'm.onnx'}"), capsys, tmp_path, bad, "refused")
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_train_refuses_a_pretraining_checkpoint_that_would_run_code(tiny_config, trained, tmp_path, capsys):
+    bad = crafted_checkpoint(tmp_path / "bad.ckpt", trained[0])
+    cfg = tiny_config(tmp_path, "pretraining=segmentation", f"pretraining.checkpoint={bad}", "mlflow.enabled=false")
+    refused(train, cfg, capsys, tmp_path, bad, "refused")
+    assert not (tmp_path / "pwned").exists()
+
+
+@pytest.mark.parametrize(
+    ("make", "says"),
+    [
+        (lambda p, good: p.write_bytes(good.read_bytes()[:5000]), "not a readable PyTorch checkpoint"),
+        (lambda p, good: p.write_text("hello"), "not a readable PyTorch checkpoint"),
+        (lambda p, good: torch.save({"weights": torch.zeros(3)}, p), "not a checkpoint of this project"),
+    ],
+    ids=["truncated", "text", "foreign dict"],
+)
+def test_predict_names_a_corrupt_or_foreign_checkpoint(compose_config, trained, frames_folder, tmp_path, capsys, make, says):
+    bad = tmp_path / "bad.ckpt"
+    make(bad, trained[0])
+    cfg = compose_config(f"predict.checkpoint={bad}", f"predict.input={frames_folder}", f"predict.out_dir={tmp_path / 'out'}")
+    refused(run_predict, cfg, capsys, tmp_path, bad, says)
+
+
+def test_predict_refuses_a_segmentation_pretraining_checkpoint(compose_config, tiny_config, trained, frames_folder, tmp_path, capsys):
+    semantic = tmp_path / "semantic.ckpt"
+    saved = torch.load(trained[0], weights_only=True)
+    saved["hyper_parameters"]["num_classes"] = 8
+    torch.save(saved, semantic)
+    cfg = compose_config(f"predict.checkpoint={semantic}", f"predict.input={frames_folder}", f"predict.out_dir={tmp_path / 'out'}")
+    refused(run_predict, cfg, capsys, tmp_path, semantic, "not a path model checkpoint")
+
+
+def test_predict_refuses_weights_of_another_network(compose_config, trained, frames_folder, tmp_path, capsys):
+    other = tmp_path / "other.ckpt"
+    saved = torch.load(trained[0], weights_only=True)
+    saved["hyper_parameters"]["model"] = "fcn"  # says FCN, holds U-Net weights
+    torch.save(saved, other)
+    cfg = compose_config(f"predict.checkpoint={other}", f"predict.input={frames_folder}", f"predict.out_dir={tmp_path / 'out'}")
+    refused(run_predict, cfg, capsys, tmp_path, other, "do not fit")
+
+
+def test_a_corrupt_resume_checkpoint_is_named_and_resume_false_starts_afresh(tiny_config, tmp_path, capsys):
+    cfg = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false")
+    train(cfg)
+    (last,) = (tmp_path / ".resume").glob("run-*/last.ckpt")
+    last.write_bytes(last.read_bytes()[:1000])
+    shutil.rmtree(tmp_path / "run")
+    refused(train, cfg, capsys, tmp_path, last, "train.resume=false")
+    cfg.train.resume = False
+    assert train(cfg)["global_step"] > 0
+
+
+def test_a_resume_checkpoint_of_another_configuration_is_refused(tiny_config, tmp_path, capsys):
+    first = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false")
+    train(first)
+    (state_a,) = (tmp_path / ".resume").glob("run-*")
+    changed = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false", "model.laptop_lr=0.001")
+    train(changed)
+    (state_b,) = set((tmp_path / ".resume").glob("run-*")) - {state_a}  # a changed config never shares resume state
+    shutil.copy(state_a / "last.ckpt", state_b / "last.ckpt")  # as if it did
+    shutil.rmtree(tmp_path / "run")
+    refused(train, changed, capsys, tmp_path, state_b / "last.ckpt", "belongs to another configuration")
