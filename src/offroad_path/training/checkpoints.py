@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import os
 import pickle
+import re
 from pathlib import Path
 from typing import Any
 
@@ -33,13 +34,19 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     try:
         saved = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:  # what weights_only raises on anything but tensors and plain values
-        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise CheckpointError(f"{path}: refused, it holds objects that could run code when loaded ({first})") from e
+        found = re.search(r"(?:unsupported|Unsupported global:) GLOBAL (\S+)", str(e))
+        what = f"it would call {found.group(1)}" if found else _first_sentence(e)
+        raise CheckpointError(f"{path}: refused, it holds objects that could run code when loaded ({what})") from e
     except Exception as e:  # truncated zip, not a torch file at all, ...
-        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {e})") from e
+        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {_first_sentence(e)})") from e
     if not isinstance(saved, dict) or not isinstance(saved.get("state_dict"), dict) or not isinstance(saved.get("hyper_parameters"), dict):
         raise CheckpointError(f"{path}: not a checkpoint of this project (no state_dict and hyper_parameters)")
     return saved
+
+
+def _first_sentence(error: Exception) -> str:
+    text = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+    return text.split(". ")[0]
 
 
 def save_weights(path: Path, task: L.LightningModule, **extra: Any) -> None:
@@ -53,9 +60,12 @@ def load_weights(task: L.LightningModule, path: str | Path, saved: dict[str, Any
     saved = saved if saved is not None else load_checkpoint(path)
     try:
         task.load_state_dict(saved["state_dict"])
-    except RuntimeError as e:
-        problem = str(e).strip().splitlines()[0]
-        raise CheckpointError(f"{path}: its weights do not fit this network ({problem})") from e
+    except RuntimeError as e:  # torch lists the keys: name the count and the first
+        state, ours = set(saved["state_dict"]), set(task.state_dict())
+        missing, extra = sorted(ours - state), sorted(state - ours)
+        problem = f"{len(missing)} weights missing, first {missing[0]}" if missing else ""
+        problem += ("; " if problem else "") + (f"{len(extra)} unexpected, first {extra[0]}" if extra else "")
+        raise CheckpointError(f"{path}: its weights do not fit this network ({problem or 'tensor shapes differ'})") from e
 
 
 def file_digest(paths: list[Path], into: Any = None) -> Any:
