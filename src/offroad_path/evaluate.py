@@ -1,5 +1,5 @@
 """Stage `evaluate`: every run with and without post-processing, scored the paper's way, beside
-the baselines a model must beat (see offroad_path.evaluation and DESIGN.md).
+the baselines a model must beat (see offroad_path.evaluation and docs/design.md).
 
     python -m offroad_path.evaluate [evaluate.runs='[unet-none,unet-segmentation]'] [evaluate.threshold=0.4]
 

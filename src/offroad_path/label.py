@@ -1,4 +1,4 @@
-"""Stage `label`: stereo visual odometry and vehicle-footprint path labels (see DESIGN.md).
+"""Stage `label`: stereo visual odometry and vehicle-footprint path labels (see docs/design.md).
 
     python -m offroad_path.label [label.in_dir=/my/recordings] [label.poses.source=file]
         [label.strategy=stride label.stride_m=5] [label.occlusion.enabled=false]

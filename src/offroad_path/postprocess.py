@@ -1,5 +1,5 @@
 """Stage `postprocess`: the paper's post-processing of one run's test-set confidence maps (see
-offroad_path.postprocessing and DESIGN.md).
+offroad_path.postprocessing and docs/design.md).
 
     python -m offroad_path.postprocess model=unet pretraining=none [postprocess.sigma=4]
 

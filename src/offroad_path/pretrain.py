@@ -13,7 +13,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from offroad_path.training.run import fit
+from offroad_path.training.run import fit_segmentation
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.world.classes import CLASS_NAMES
 
@@ -24,7 +24,7 @@ def pretrain(cfg: DictConfig) -> dict:
     if cfg.pretrain.max_epochs is not None:
         cfg = cfg.copy()
         cfg.trainer.max_epochs = cfg.pretrain.max_epochs
-    metrics = fit(cfg, "pretrain", "semantic", len(CLASS_NAMES), Path(cfg.pretrain.out_dir), "none")
+    metrics = fit_segmentation(cfg, "pretrain", "semantic", len(CLASS_NAMES), Path(cfg.pretrain.out_dir), "none")
     log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])
     return metrics
 

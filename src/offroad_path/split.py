@@ -1,4 +1,4 @@
-"""Stage `split`: train / validation / test manifests of the labelled frames (see DESIGN.md).
+"""Stage `split`: train / validation / test manifests of the labelled frames (see docs/design.md).
 
     python -m offroad_path.split [split.strategy=random] [split.mirror=false]
 
@@ -53,8 +53,9 @@ def split(cfg: DictConfig) -> dict:
         raise ValueError(f"{c.labels_dir}: holds no labels to split")
     parts, guarded = split_frames(frames, c.strategy, c.test_fraction, c.val_fraction, c.block_m, c.guard_m, c.seed)
     counts = {}
-    inputs = [c.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
-    with atomic_directory(c.out_dir, "split", [c.labels_dir], key="split.out_dir") as tmp:
+    listed = [c.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
+    recordings = sorted({str(Path(sample.image).parents[1]) for sample in samples.values()})  # <sequence>/image_l/NNNNNN.png
+    with atomic_directory(c.out_dir, "split", [c.labels_dir, *recordings], key="split.out_dir") as tmp:
         for name, part in parts.items():
             rows = []
             for frame in part:
@@ -65,7 +66,7 @@ def split(cfg: DictConfig) -> dict:
             write_manifest(tmp / f"{name}.csv", rows)
             counts[name] = len(rows)
         summary = {"frames": len(frames), "guarded_out": guarded, "samples": counts, "strategy": c.strategy, "mirror": c.mirror,
-                   "data_root": data_root(inputs)}  # fmt: skip
+                   "data_root": data_root(listed)}  # fmt: skip
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     log.info("split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones",
              len(frames), counts, " (with mirrored copies)" if c.mirror else "", guarded)  # fmt: skip

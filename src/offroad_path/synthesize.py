@@ -1,4 +1,4 @@
-"""Stage `synthesize`: render the embedded synthetic stereo off-road world (see DESIGN.md).
+"""Stage `synthesize`: render the embedded synthetic stereo off-road world (see docs/design.md).
 
 python -m offroad_path.synthesize [experiment=paper] [world/rig=gopro] [synthesize.sequences=4]
 """

@@ -1,5 +1,5 @@
 """Stage `train`: fit one architecture with one pretraining choice on the path labels, test it,
-and write the test-set confidence maps for post-processing (see DESIGN.md).
+and write the test-set confidence maps for post-processing (see docs/design.md).
 
     python -m offroad_path.train model=segnet pretraining=segmentation
     python -m offroad_path.train -m model=segnet,fcn,unet pretraining=none,segmentation
@@ -16,7 +16,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from offroad_path.training.run import fit, write_confidence_maps
+from offroad_path.training.run import fit_segmentation, write_confidence_maps
 from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.train")
@@ -25,11 +25,12 @@ log = logging.getLogger("offroad_path.train")
 def train(cfg: DictConfig) -> dict:
     out_dir = Path(cfg.train.out_dir)
 
-    def predictions(task, data, tmp: Path) -> None:
+    def predictions(task, data, tmp: Path) -> dict:
         written = write_confidence_maps(task, data, tmp / "predictions", out_dir / "predictions")
         log.info("%d confidence maps in %s", written, out_dir / "predictions")
+        return {}
 
-    metrics = fit(cfg, "train", "path", 2, out_dir, cfg.pretraining.name, predictions)
+    metrics = fit_segmentation(cfg, "train", "path", 2, out_dir, cfg.pretraining.name, predictions)
     log.info("%s-%s: best validation IoU %s, test IoU %.4f", cfg.model.name, cfg.pretraining.name, metrics["best_val_iou"],
              metrics["test/iou"])  # fmt: skip
     return metrics

@@ -18,16 +18,15 @@ from pathlib import Path
 import lightning as L
 import numpy as np
 import torch
-from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
-from offroad_path.steering.frames import steering_split
+from offroad_path.steering.frames import PARTS, steering_split
 from offroad_path.steering.task import SteeringTask
-from offroad_path.training.checkpoints import load_weights, save_weights
-from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
+from offroad_path.training.run import LENGTH_SETTINGS, RunSpec, fit
+from offroad_path.utils.atomic import check_output_dir, write_text_atomic
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 
@@ -59,48 +58,49 @@ def predict(task: SteeringTask, loader) -> tuple[np.ndarray, np.ndarray]:
 
 def train_steering(cfg: DictConfig) -> dict:
     s, t = cfg.steering, cfg.trainer
-    check_output_dir(s.out_dir, "steering.out_dir", [s.labels_dir, s.split_dir])
+    inputs = [s.labels_dir, s.split_dir]
+    check_output_dir(s.out_dir, "steering.out_dir", inputs)
     L.seed_everything(s.seed, workers=True)
     parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror)
     data = SteeringDataModule(parts, s.width, s.height, s.batch_size, s.jitter, s.seed)
     task = SteeringTask(s.width, s.height, s.lr, s.lr_step_epochs, s.lr_gamma, s.momentum, s.weight_decay)
-    logger = steering_logger(cfg)
-    out_dir = Path(s.out_dir)
-    with atomic_directory(out_dir, "train_steering", [s.labels_dir, s.split_dir], key="steering.out_dir") as tmp:
-        best = ModelCheckpoint(dirpath=tmp / "checkpoints", filename="best", monitor=task.monitor, mode=task.mode)
-        trainer = L.Trainer(
-            max_epochs=s.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
-            precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
-            logger=logger if logger is not None else False, default_root_dir=tmp, enable_progress_bar=False,
-            callbacks=[best, EarlyStopping(task.monitor, mode=task.mode, patience=s.patience)],
-        )  # fmt: skip
-        trainer.fit(task, data)
-        if best.best_model_path:
-            # Published as weights and hyper-parameters only: Lightning's checkpoint names the temporary folder.
-            load_weights(task, best.best_model_path)
-            save_weights(Path(best.best_model_path), task)
+    outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs")
+    identity = {
+        "stage": "train_steering", "block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,
+        "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs},
+        "trainer": {k: v for k, v in OmegaConf.to_container(t, resolve=True).items() if k not in LENGTH_SETTINGS},
+    }  # fmt: skip
+    files = [Path(s.split_dir) / f"{part}.csv" for part in PARTS] + [Path(s.labels_dir) / "summary.json"]
+    spec = RunSpec("train_steering", Path(s.out_dir), inputs, s.seed, cfg.train.resume, s.max_epochs, s.patience, identity, files,
+                   out_key="steering.out_dir")  # fmt: skip
+    scored: dict[str, np.ndarray] = {}
+
+    def write_predictions(task: SteeringTask, data: SteeringDataModule, tmp: Path) -> dict:
         true, predicted = predict(task, data.test_dataloader())
-        best_val = None if best.best_model_score is None else float(best.best_model_score)
-        metrics = {**steering_metrics(true, predicted), "best_val_mae": best_val, "epochs": trainer.current_epoch}
+        scored.update(true=true, predicted=predicted)
         bins = error_by_magnitude(true, predicted)
-        frames = parts["test"]
         with open(tmp / "predictions.csv", "w", newline="") as f:
             writer = csv.writer(f)
             writer.writerow(["sequence", "frame", "mirrored", "true", "predicted"])
-            for frame, a, b in zip(frames, true, predicted, strict=True):
+            for frame, a, b in zip(parts["test"], true, predicted, strict=True):
                 writer.writerow([frame.sequence, frame.frame, frame.mirrored, f"{a:.6f}", f"{b:.6f}"])
         with open(tmp / "error_by_magnitude.csv", "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(bins[0]))
             writer.writeheader()
             writer.writerows(bins)
-        (tmp / "metrics.json").write_text(json.dumps({**metrics, "by_true_magnitude": bins}, indent=2) + "\n")
         scatter_plot(true, predicted, tmp / "scatter.png")
+        return {**steering_metrics(true, predicted), "by_true_magnitude": bins}
+
+    logger = steering_logger(cfg)
+    results = fit(task, data, spec, t, logger, write_predictions)
+    metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
+    true, predicted = scored["true"], scored["predicted"]
     write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n")
     write_text_atomic(s.plots_path, "truth,prediction\n" + "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True)))
     if logger is not None:
         logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
-        for name in ("scatter.png", "error_by_magnitude.csv", "metrics.json"):
-            logger.experiment.log_artifact(logger.run_id, str(out_dir / name))
+        for name in ("scatter.png", "error_by_magnitude.csv"):
+            logger.experiment.log_artifact(logger.run_id, str(Path(s.out_dir) / name))
     log.info("PilotNet: test mean absolute error %.4f (straight ahead would score %.4f), largest predicted magnitude %.3f of true %.3f",
              metrics["mean_absolute_error"], metrics["straight_ahead_mean_absolute_error"], metrics["largest_predicted_magnitude"],
              metrics["largest_true_magnitude"])  # fmt: skip

@@ -46,10 +46,9 @@ def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = N
 
 def image_size(path: Path) -> tuple[int, int]:
     """(width, height) from an image file's header, without decoding its pixels."""
-    from PIL import Image
-
     if path.suffix.lower() == ".png":
         return png_size(path)
+    from PIL import Image
 
     try:
         with Image.open(path) as image:

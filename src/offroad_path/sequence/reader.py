@@ -1,4 +1,4 @@
-"""Reading stereo sequences: this project's layout (see DESIGN.md) and KITTI's odometry layout.
+"""Reading stereo sequences: this project's layout (see docs/design.md) and KITTI's odometry layout.
 
 Everything is validated on opening, so that a later stage never meets a half-good sequence:
 every error names the file and says what is wrong with it.

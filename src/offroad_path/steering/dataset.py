@@ -10,7 +10,7 @@ import torch
 from albumentations.pytorch import ToTensorV2
 from torch.utils.data import DataLoader, Dataset
 
-from offroad_path.data.dataset import read
+from offroad_path.data.dataset import EpochSampler, read
 from offroad_path.steering.frames import SteeringFrame
 
 
@@ -30,7 +30,11 @@ class SteeringDataset(Dataset):
     def __len__(self) -> int:
         return len(self.frames)
 
-    def __getitem__(self, i: int) -> dict:
+    def __getitem__(self, key: int | tuple[int, int]) -> dict:
+        """key: an index, or (index, augmentation seed) from EpochSampler (see offroad_path.data.dataset)."""
+        i, seed = key if isinstance(key, tuple) else (key, None)
+        if seed is not None:
+            self.transform.set_random_seed(seed)
         frame = self.frames[i]
         image = cv2.cvtColor(read(frame.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
         if frame.mirrored:
@@ -46,8 +50,8 @@ class SteeringDataModule(L.LightningDataModule):
 
     def _loader(self, part: str, train: bool) -> DataLoader:
         transform = steering_transforms(self.width, self.height, self.jitter if train else 0.0, self.seed)
-        generator = torch.Generator().manual_seed(self.seed)
-        return DataLoader(SteeringDataset(self.parts[part], transform), self.batch_size, shuffle=train, generator=generator)
+        dataset = SteeringDataset(self.parts[part], transform)
+        return DataLoader(dataset, self.batch_size, sampler=EpochSampler(len(dataset), self.seed) if train else None)
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train", train=True)

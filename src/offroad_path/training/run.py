@@ -1,6 +1,7 @@
-"""One training run, shared by the `pretrain` and `train` stages: data, task, pretrained
-initialisation, Lightning trainer with early stopping and resumable checkpoints, MLflow, test, and
-the test-set confidence maps that post-processing reads."""
+"""One training loop for every stage that trains (pretrain, train, train_steering): Lightning trainer
+with early stopping, resumable and exactly reproducible checkpoints, MLflow, test, published
+weights; and for the path networks, their data, task, initialisation and the test-set confidence
+maps that post-processing reads."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import random
 import shutil
 import warnings
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import lightning as L
@@ -115,23 +117,28 @@ class StampConfig(L.Callback):
 LENGTH_SETTINGS = {"max_epochs", "fast_dev_run", "log_every_n_steps"}
 
 
-def run_key(cfg: DictConfig, stage: str, target: str, data: OffroadDataModule) -> str:
-    """The identity of a training run: every setting that changes what it computes, and the bytes of
-    its manifests, label masks and pretraining checkpoint (so new data or a new pretraining never
-    resumes an old run). Paths are taken as configured, never resolved."""
-    settings = {
-        "stage": stage, "target": target, "seed": cfg.train.seed,
-        "data": {k: v for k, v in OmegaConf.to_container(cfg.data, resolve=True).items() if k not in ("num_workers", "pin_memory")},
-        "model": OmegaConf.to_container(cfg.model, resolve=True),
-        "pretraining": OmegaConf.to_container(cfg.pretraining, resolve=True) if stage == "train" else None,
-        "trainer": {k: v for k, v in OmegaConf.to_container(cfg.trainer, resolve=True).items() if k not in LENGTH_SETTINGS},
-    }  # fmt: skip
-    digest = hashlib.sha256(json.dumps(settings, sort_keys=True).encode())
-    files = [data.split_dir / f"{name}.csv" for name in ("train", "val", "test")]
-    files += sorted({Path(s.label) for name in ("train", "val") for s in data.samples[name]})
-    if stage == "train" and cfg.pretraining.name != "none":
-        files.append(Path(cfg.pretraining.checkpoint or cfg.pretraining.weights_path or ""))
-    return file_digest(files, digest).hexdigest()[:16]
+@dataclass
+class RunSpec:
+    """What a training run needs besides its task and data (one spec for pretrain, train and
+    train_steering)."""
+
+    stage: str
+    out_dir: Path
+    inputs: list[str]  # folders and files out_dir must not overlap
+    seed: int
+    resume: bool
+    max_epochs: int
+    patience: int
+    identity: dict  # every setting that changes what the run computes
+    files: list[Path] = field(default_factory=list)  # inputs whose bytes are part of its identity
+    callbacks: list[L.Callback] = field(default_factory=list)
+    out_key: str = ""  # the config key of out_dir, for messages (default: <stage>.out_dir)
+
+
+def run_key(identity: dict, files: list[Path]) -> str:
+    """The identity of a training run: its settings and the bytes of its input files (so new data or
+    a new pretraining never resumes an old run). Paths are taken as configured, never resolved."""
+    return file_digest(files, hashlib.sha256(json.dumps(identity, sort_keys=True).encode())).hexdigest()[:16]
 
 
 def resume_checkpoint(work: Path, key: str, resume: bool) -> str | None:
@@ -157,22 +164,70 @@ def resume_checkpoint(work: Path, key: str, resume: bool) -> str | None:
 
 
 def fit(
+    task: L.LightningModule,
+    data: L.LightningDataModule,
+    spec: RunSpec,
+    trainer_cfg: DictConfig,
+    logger: MLFlowLogger | None,
+    write_more: Callable[[L.LightningModule, L.LightningDataModule, Path], dict] | None = None,
+) -> dict:
+    """Train `task` (early stopping on task.monitor), test its best weights, and write spec.out_dir
+    atomically: checkpoints/best.ckpt (weights and hyper-parameters only), metrics.json, and
+    whatever `write_more(task, data, tmp)` adds (it returns extra metrics).
+
+    Lightning's full checkpoints live in a work folder beside out_dir (`.resume/<name>-<hash>`), keyed
+    by the run's identity: outside the stage's DVC output, so an interrupted run (even under
+    `dvc repro`, which deletes outputs before a stage runs) resumes there when spec.resume, and
+    the resumed run ends exactly as an uninterrupted one (per-epoch seeding and sampling).
+    """
+    t = trainer_cfg
+    key = run_key(spec.identity, spec.files)
+    work = spec.out_dir.parent / ".resume" / f"{spec.out_dir.name}-{key}"
+    resume = resume_checkpoint(work, key, spec.resume)
+    if not t.fast_dev_run:
+        work.mkdir(parents=True, exist_ok=True)
+        (work / MARKER).write_text(f"{spec.stage} resume\n")
+        warnings.filterwarnings("ignore", message="Checkpoint directory .* exists and is not empty")  # the marker, or a resume
+    if resume:
+        log.info("resuming from %s", resume)
+    best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
+    # Lightning's save_last writes only when the best changes; a resume wants every epoch's end.
+    latest = ModelCheckpoint(dirpath=work, filename="last", enable_version_counter=False)
+    trainer = L.Trainer(
+        max_epochs=spec.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
+        precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
+        callbacks=[best, latest, EarlyStopping(task.monitor, mode=task.mode, patience=spec.patience), SeedEachEpoch(spec.seed),
+                   StampConfig(key), *spec.callbacks],
+        plugins=[AtomicCheckpointIO()], logger=logger if logger is not None else False, default_root_dir=work, enable_progress_bar=False,
+    )  # fmt: skip
+    trainer.fit(task, data, ckpt_path=resume, weights_only=True)
+    if best.best_model_path:
+        load_weights(task, best.best_model_path)
+    tested = trainer.test(task, data, verbose=False)[0]
+    metrics = {f"best_{task.monitor.replace('/', '_')}": float(best.best_model_score) if best.best_model_score is not None else None,
+               "epochs": trainer.current_epoch, "global_step": trainer.global_step, **{k: float(v) for k, v in tested.items()}}  # fmt: skip
+    with atomic_directory(spec.out_dir, spec.stage, spec.inputs, key=spec.out_key or f"{spec.stage}.out_dir") as tmp:
+        extra = {"datamodule_hyper_parameters": dict(data.hparams)} if data.hparams else {}
+        save_weights(tmp / "checkpoints" / "best.ckpt", task, **extra, **{CONFIG_HASH: key})
+        if write_more is not None:
+            metrics.update(write_more(task, data, tmp))
+        (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    if logger is not None:
+        logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
+        logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
+    return metrics
+
+
+def fit_segmentation(
     cfg: DictConfig,
     stage: str,
     target: str,
     num_classes: int,
     out_dir: Path,
     pretraining: str,
-    write_more: Callable[[SegmentationTask, OffroadDataModule, Path], None] | None = None,
+    write_more: Callable[[SegmentationTask, OffroadDataModule, Path], dict] | None = None,
 ) -> dict:
-    """Train, test the best weights, and write out_dir atomically: checkpoints/best.ckpt (weights and
-    hyper-parameters only), metrics.json, and whatever `write_more(task, data, tmp)` adds.
-
-    Lightning's full checkpoints live in a work folder beside out_dir (`.resume/<name>-<hash>`), keyed
-    by the run's config hash: outside the stage's DVC output, so an interrupted run (even under
-    `dvc repro`, which deletes outputs before a stage runs) resumes there when cfg.train.resume, and
-    the resumed run ends exactly as an uninterrupted one (per-epoch seeding and sampling).
-    """
+    """The pretrain and train stages' run: a segmentation network on the split's manifests (see fit)."""
     inputs = [cfg.data.split_dir] + ([cfg.pretraining.checkpoint] if stage == "train" and cfg.pretraining.checkpoint else [])
     check_output_dir(out_dir, f"{stage}.out_dir", inputs)
     L.seed_everything(cfg.train.seed, workers=True)
@@ -185,41 +240,20 @@ def fit(
     loaded = initialise(task.model, pretraining, cfg.pretraining, m.name, m.width)
     if loaded:
         log.info("initialised %d parameter tensors from %s pretraining", len(loaded), pretraining)
-    key = run_key(cfg, stage, target, data)
-    work = out_dir.parent / ".resume" / f"{out_dir.name}-{key}"
-    resume = resume_checkpoint(work, key, cfg.train.resume)
-    if not t.fast_dev_run:
-        work.mkdir(parents=True, exist_ok=True)
-        (work / MARKER).write_text(f"{stage} resume\n")
-        warnings.filterwarnings("ignore", message="Checkpoint directory .* exists and is not empty")  # the marker, or a resume
-    if resume:
-        log.info("resuming from %s", resume)
-    best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
-    # Lightning's save_last writes only when the best changes; a resume wants every epoch's end.
-    latest = ModelCheckpoint(dirpath=work, filename="last", enable_version_counter=False)
-    logger = mlflow_logger(cfg, stage)
-    trainer = L.Trainer(
-        max_epochs=t.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
-        precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
-        callbacks=[best, latest, EarlyStopping(task.monitor, mode=task.mode, patience=t.patience), LogSamples(cfg.train.sample_images),
-                   SeedEachEpoch(cfg.train.seed), StampConfig(key)],
-        plugins=[AtomicCheckpointIO()], logger=logger if logger is not None else False, default_root_dir=work, enable_progress_bar=False,
-    )  # fmt: skip
-    trainer.fit(task, data, ckpt_path=resume, weights_only=True)
-    if best.best_model_path:
-        load_weights(task, best.best_model_path)
-    tested = trainer.test(task, data, verbose=False)[0]
-    metrics = {"best_val_iou": float(best.best_model_score) if best.best_model_score is not None else None, "epochs": trainer.current_epoch,
-               "global_step": trainer.global_step, **{k: float(v) for k, v in tested.items()}}  # fmt: skip
-    with atomic_directory(out_dir, stage, inputs, key=f"{stage}.out_dir") as tmp:
-        save_weights(tmp / "checkpoints" / "best.ckpt", task, datamodule_hyper_parameters=dict(data.hparams), **{CONFIG_HASH: key})
-        (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-        if write_more is not None:
-            write_more(task, data, tmp)
-    if logger is not None:
-        logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
-        logger.experiment.log_artifact(logger.run_id, str(out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
-    return metrics
+    identity = {
+        "stage": stage, "target": target, "seed": cfg.train.seed,
+        "data": {k: v for k, v in OmegaConf.to_container(cfg.data, resolve=True).items() if k not in ("num_workers", "pin_memory")},
+        "model": OmegaConf.to_container(cfg.model, resolve=True),
+        "pretraining": OmegaConf.to_container(cfg.pretraining, resolve=True) if stage == "train" else None,
+        "trainer": {k: v for k, v in OmegaConf.to_container(cfg.trainer, resolve=True).items() if k not in LENGTH_SETTINGS},
+    }  # fmt: skip
+    files = [data.split_dir / f"{name}.csv" for name in ("train", "val", "test")]
+    files += sorted({Path(s.label) for name in ("train", "val") for s in data.samples[name]})
+    if stage == "train" and cfg.pretraining.name != "none":
+        files.append(Path(cfg.pretraining.checkpoint or cfg.pretraining.weights_path or ""))
+    spec = RunSpec(stage, out_dir, inputs, cfg.train.seed, cfg.train.resume, t.max_epochs, t.patience, identity, files,
+                   [LogSamples(cfg.train.sample_images)])  # fmt: skip
+    return fit(task, data, spec, t, mlflow_logger(cfg, stage), write_more)
 
 
 def write_confidence_maps(task: SegmentationTask, data: OffroadDataModule, tmp: Path, final: Path) -> int:

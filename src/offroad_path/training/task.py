@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import lightning as L
 import torch
-import torch.nn.functional as F
 from torchmetrics import MetricCollection
 from torchmetrics.classification import (
     BinaryAccuracy,
@@ -19,8 +18,47 @@ from torchmetrics.classification import (
 from offroad_path.models import build_model
 
 
-class SegmentationTask(L.LightningModule):
-    monitor, mode = "val/iou", "max"  # what early stopping and the best checkpoint follow
+class BaseTask(L.LightningModule):
+    """What every task of this project shares (torchgeo's pattern): subclasses build their network,
+    loss and metrics in the configure_* hooks, name the validation metric that early stopping and
+    the best checkpoint follow, and write one `_step`; all train with the paper's SGD."""
+
+    monitor: str
+    mode: str  # "max" or "min"
+
+    def configure(self) -> None:
+        """Call at the end of a subclass's __init__, after save_hyperparameters."""
+        self.configure_models()
+        self.configure_losses()
+        self.configure_metrics()
+
+    def configure_models(self) -> None:
+        raise NotImplementedError
+
+    def configure_losses(self) -> None:
+        raise NotImplementedError
+
+    def configure_metrics(self) -> None:
+        raise NotImplementedError
+
+    def _step(self, batch: dict, split: str) -> torch.Tensor:
+        raise NotImplementedError
+
+    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
+        return self._step(batch, "train")
+
+    def validation_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, "val")
+
+    def test_step(self, batch: dict, batch_idx: int) -> None:
+        self._step(batch, "test")
+
+    def configure_optimizers(self):
+        return sgd_with_step_decay(self)
+
+
+class SegmentationTask(BaseTask):
+    monitor, mode = "val/iou", "max"
 
     def __init__(
         self,
@@ -36,13 +74,15 @@ class SegmentationTask(L.LightningModule):
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
-        self.configure_models()
-        self.configure_metrics()
+        self.configure()
 
     def configure_models(self) -> None:
         self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width)
         if self.hparams.channels_last:
             self.model = self.model.to(memory_format=torch.channels_last)
+
+    def configure_losses(self) -> None:
+        self.loss = torch.nn.CrossEntropyLoss()  # per-pixel softmax cross-entropy, the paper's
 
     def configure_metrics(self) -> None:
         n = self.hparams.num_classes
@@ -63,25 +103,14 @@ class SegmentationTask(L.LightningModule):
             image = image.contiguous(memory_format=torch.channels_last)
         return self.model(image)
 
-    def _step(self, batch: dict, metrics: MetricCollection, split: str) -> torch.Tensor:
+    def _step(self, batch: dict, split: str) -> torch.Tensor:
         scores = self(batch["image"])
-        loss = F.cross_entropy(scores, batch["target"])
+        loss = self.loss(scores, batch["target"])
+        metrics = {"train": self.train_metrics, "val": self.val_metrics, "test": self.test_metrics}[split]
         metrics.update(scores.argmax(dim=1), batch["target"])
         self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(scores))
         self.log_dict(metrics, on_step=False, on_epoch=True)
         return loss
-
-    def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        return self._step(batch, self.train_metrics, "train")
-
-    def validation_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, self.val_metrics, "val")
-
-    def test_step(self, batch: dict, batch_idx: int) -> None:
-        self._step(batch, self.test_metrics, "test")
-
-    def configure_optimizers(self):
-        return sgd_with_step_decay(self)
 
 
 def sgd_with_step_decay(task: L.LightningModule):

@@ -1,4 +1,4 @@
-"""Drive through a world and record it as a stereo sequence in the layout of DESIGN.md."""
+"""Drive through a world and record it as a stereo sequence in the layout of docs/design.md."""
 
 from __future__ import annotations
 
