@@ -1,4 +1,4 @@
-"""The synthesize stage against the sequence contract of DESIGN.md, and its configuration."""
+"""The synthesize stage against the sequence contract of docs/design.md, and its configuration."""
 
 from __future__ import annotations
 

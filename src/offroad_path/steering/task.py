@@ -4,6 +4,7 @@ step decay as the thesis trained PilotNet; mean absolute error per split (torchm
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torchmetrics import MeanAbsoluteError
 
 from offroad_path.steering.pilotnet import PilotNet
@@ -23,7 +24,7 @@ class SteeringTask(BaseTask):
         self.model = PilotNet(self.hparams.width, self.hparams.height)
 
     def configure_losses(self) -> None:
-        self.loss = torch.nn.MSELoss()
+        self.loss = F.mse_loss
 
     def configure_metrics(self) -> None:
         self.mae = torch.nn.ModuleDict({f"{split}_mae": MeanAbsoluteError() for split in ("train", "val", "test")})

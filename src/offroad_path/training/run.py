@@ -135,10 +135,15 @@ class RunSpec:
     out_key: str = ""  # the config key of out_dir, for messages (default: <stage>.out_dir)
 
 
+PACKAGE = Path(__file__).resolve().parents[1]
+
+
 def run_key(identity: dict, files: list[Path]) -> str:
-    """The identity of a training run: its settings and the bytes of its input files (so new data or
-    a new pretraining never resumes an old run). Paths are taken as configured, never resolved."""
-    return file_digest(files, hashlib.sha256(json.dumps(identity, sort_keys=True).encode())).hexdigest()[:16]
+    """The identity of a training run: its settings, the bytes of its input files and of this
+    package's code (so new data, a new pretraining or a code change never resumes an old run, even
+    one that finished). Paths are taken as configured, never resolved."""
+    digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode())
+    return file_digest(files + sorted(PACKAGE.rglob("*.py")), digest).hexdigest()[:16]
 
 
 def resume_checkpoint(work: Path, key: str, resume: bool) -> str | None:

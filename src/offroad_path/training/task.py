@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import lightning as L
 import torch
+import torch.nn.functional as F
 from torchmetrics import MetricCollection
 from torchmetrics.classification import (
     BinaryAccuracy,
@@ -82,7 +83,7 @@ class SegmentationTask(BaseTask):
             self.model = self.model.to(memory_format=torch.channels_last)
 
     def configure_losses(self) -> None:
-        self.loss = torch.nn.CrossEntropyLoss()  # per-pixel softmax cross-entropy, the paper's
+        self.loss = F.cross_entropy  # per-pixel softmax cross-entropy, the paper's (a function: no module in the state dict)
 
     def configure_metrics(self) -> None:
         n = self.hparams.num_classes
