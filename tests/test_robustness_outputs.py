@@ -148,7 +148,7 @@ def test_predict_names_a_corrupt_or_foreign_checkpoint(compose_config, trained, 
     refused(run_predict, cfg, capsys, tmp_path, bad, says)
 
 
-def test_predict_refuses_a_segmentation_pretraining_checkpoint(compose_config, tiny_config, trained, frames_folder, tmp_path, capsys):
+def test_predict_refuses_a_segmentation_pretraining_checkpoint(compose_config, trained, frames_folder, tmp_path, capsys):
     semantic = tmp_path / "semantic.ckpt"
     saved = torch.load(trained[0], weights_only=True)
     saved["hyper_parameters"]["num_classes"] = 8
