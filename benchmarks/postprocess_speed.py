@@ -18,6 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from offroad_path.config import load_config
 from offroad_path.data.dataset import load_depth
 from offroad_path.data.manifest import read_predictions_manifest
 from offroad_path.postprocessing import PostprocessParams, postprocess
@@ -33,6 +34,7 @@ def main() -> None:
     rows = read_predictions_manifest(ROOT / "data" / "runs" / args.run / "predictions" / "manifest.csv")
     maps = np.stack([np.load(ROOT / path).astype(np.float32) for _, path in rows])  # (N, H, W)
     depth = np.stack([load_depth(sample) for sample, _ in rows])
+    params = PostprocessParams.from_config(load_config().postprocess)
     print(f"{len(maps)} maps of {maps.shape[2]} x {maps.shape[1]} from {args.run}")
     default_threads = cv2.getNumThreads()
     for threads in sorted({1, default_threads}):
@@ -40,7 +42,7 @@ def main() -> None:
         times = []
         for _ in range(args.repeats):
             start = time.perf_counter()
-            postprocess(maps, depth, PostprocessParams())
+            postprocess(maps, depth, params)
             times.append((time.perf_counter() - start) / len(maps) * 1000)
         print(f"OpenCV threads {threads}: best {min(times):.2f} ms per map, median {statistics.median(times):.2f} ms")
     cv2.setNumThreads(default_threads)

@@ -6,10 +6,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
-from offroad_path.config import register_configs
+from offroad_path.config import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 KITTI_SNIPPET = ROOT.parent / "shared" / "data" / "kitti_seq1"
@@ -18,13 +17,7 @@ KITTI_SNIPPET = ROOT.parent / "shared" / "data" / "kitti_seq1"
 @pytest.fixture(scope="session")
 def compose_config() -> Callable[..., DictConfig]:
     """The project's Hydra config, composed exactly as the stages compose it, with overrides."""
-    register_configs()
-
-    def _compose(*overrides: str) -> DictConfig:
-        with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
-            return compose("config", overrides=list(overrides))
-
-    return _compose
+    return load_config
 
 
 @pytest.fixture(scope="session")

@@ -5,12 +5,18 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+import yaml
 
 from offroad_path.utils.cli import run_stage
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def snapshot(root: Path) -> dict[str, str]:
@@ -59,3 +65,43 @@ def tagged_processes(tag: str) -> list[int]:
         except OSError:
             continue
     return found
+
+
+GIT_IDENTITY = {"GIT_AUTHOR_NAME": "test", "GIT_AUTHOR_EMAIL": "test@example.com", "GIT_COMMITTER_NAME": "test",
+                "GIT_COMMITTER_EMAIL": "test@example.com"}  # fmt: skip
+
+
+def git(repo: Path, *args: str) -> None:
+    subprocess.run(["git", *args], cwd=repo, env={**os.environ, **GIT_IDENTITY}, check=True, capture_output=True)
+
+
+def dvc(repo: Path, *args: str) -> str:
+    env = {**os.environ, **GIT_IDENTITY}
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"  # `python` in dvc.yaml is this one
+    env["PYTHONPATH"] = str(repo / "src")  # the copy's code, not the installed checkout's
+    run = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=repo, env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout + run.stderr
+    return run.stdout
+
+
+def tiny_repo(repo: Path) -> Path:
+    """The project's pipeline in a fresh git + DVC repo at `repo`, on a tiny preset."""
+    for item in ("conf", "src", "dvc.yaml", ".dvcignore"):
+        (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
+    laptop = repo / "conf" / "experiment" / "laptop.yaml"
+    preset = yaml.safe_load(laptop.read_text())
+    # Tiny but real: 12 frames of two drives, labels of the next 4 m every metre, one epoch.
+    preset["world"].update(frames=12, width=256, height=144)
+    preset["synthesize"]["sequences"] = 2
+    preset["label"].update(distance_m=4.0, stride_m=1.0)
+    preset["split"] = {"block_m": 2.0, "guard_m": 1.0}
+    preset["data"].update(width=64, height=48, batch_size=2)
+    preset["model"]["width"] = 0.125
+    preset["trainer"]["max_epochs"] = 1
+    preset["pretrain"]["max_epochs"] = 1
+    preset["steering"] = {"max_epochs": 1}
+    laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
+    (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
+    git(repo, "init", "-q")
+    subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
+    return repo

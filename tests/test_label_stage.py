@@ -16,6 +16,7 @@ import pytest
 
 from offroad_path.label import label
 from offroad_path.labelling.compare import compare
+from offroad_path.odometry.stereo_vo import OdometryConfig
 from offroad_path.odometry.trajectory import drift, run_odometry
 from offroad_path.sequence import SequenceError, open_sequence
 from offroad_path.utils.atomic import MARKER
@@ -33,9 +34,9 @@ def read_report(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def test_odometry_follows_the_rendered_drive(drive):
+def test_odometry_follows_the_rendered_drive(compose_config, drive):
     seq = open_sequence(drive / "drive")
-    run = run_odometry(seq)
+    run = run_odometry(seq, OdometryConfig(**compose_config().label.odometry))
     assert not run.failed.any()
     errors, problem = drift(run.poses, seq.poses, 20.0)
     assert problem is None and errors["translation_drift_pct"] < 1.0
@@ -138,8 +139,8 @@ def test_cli_exits_non_zero_with_one_line(drive, tmp_path):
     assert not (tmp_path / "labels").exists()
 
 
-def test_odometry_on_the_real_kitti_snippet(kitti_snippet):
+def test_odometry_on_the_real_kitti_snippet(compose_config, kitti_snippet):
     seq = open_sequence(kitti_snippet)
-    run = run_odometry(seq)
+    run = run_odometry(seq, OdometryConfig(**compose_config().label.odometry))
     assert not run.failed.any()
     assert drift(run.poses, seq.poses, 20.0)[0]["translation_drift_pct"] < 1.5

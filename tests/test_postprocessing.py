@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -11,6 +13,11 @@ from offroad_path.postprocessing.filter import nearest_to_bottom_centre
 
 H, W = 96, 160
 NEAR = np.full((H, W), 5.0, np.float32)  # every pixel 5 m away: the depth mask keeps all
+PAPER = PostprocessParams(max_depth_m=20.0, sigma=6.0, delta=0.025, use_depth=True)  # Holder & Breckon's D, sigma, delta
+
+
+def test_the_default_config_holds_the_papers_values(compose_config):
+    assert PostprocessParams.from_config(compose_config().postprocess) == PAPER
 
 
 def blurred(c: np.ndarray, sigma: float = 6.0) -> np.ndarray:
@@ -25,20 +32,20 @@ def test_a_far_blob_is_removed_by_the_depth_mask():
     depth = np.full((H, W), 8.0, np.float32)
     depth[:45] = 35.0
     depth[:, :5] = 0.0  # unknown depth is masked as well
-    out = postprocess(c, depth, PostprocessParams())
+    out = postprocess(c, depth, PAPER)
     masked = np.where((depth > 0) & (depth <= 20), c, 0)
     support = blurred(masked) >= 0.025
     assert not out[:20].any()  # the far blob is gone, beyond the blur's reach
     np.testing.assert_allclose(out[support], blurred(masked)[support], atol=1e-6)
     # Without the depth mask the far blob survives (it is connected to the path).
-    assert postprocess(c, None, PostprocessParams(use_depth=False))[20:30, 70:90].min() > 0.5
+    assert postprocess(c, None, replace(PAPER, use_depth=False))[20:30, 70:90].min() > 0.5
 
 
 def test_of_two_components_the_one_nearest_the_bottom_centre_survives():
     c = np.zeros((H, W), np.float32)
     c[70:, 70:90] = 0.8  # at the bottom-centre
     c[5:30, 5:40] = 1.0  # larger and more confident, but far from where the vehicle is
-    out = postprocess(c, NEAR, PostprocessParams())
+    out = postprocess(c, NEAR, PAPER)
     assert not out[:50].any()
     reference = blurred(c)
     keep = (reference >= 0.025) & (np.arange(H)[:, None] >= 50)
@@ -48,7 +55,7 @@ def test_of_two_components_the_one_nearest_the_bottom_centre_survives():
     c2 = np.zeros((H, W), np.float32)
     c2[80:, 0:10] = 0.8  # bottom-left corner: about 75 px from the bottom-centre
     c2[30:60, 70:90] = 0.8  # 36 px above the bottom-centre: nearer
-    out2 = postprocess(c2, NEAR, PostprocessParams())
+    out2 = postprocess(c2, NEAR, PAPER)
     assert out2[40:50, 75:85].min() > 0.5 and not out2[85:, :4].any()
 
 
@@ -57,20 +64,20 @@ def test_sigma_and_delta_are_honoured(sigma):
     c = np.zeros((H, W), np.float32)
     c[H - 1, W // 2] = 1.0  # an impulse at the bottom-centre: the output is the Gaussian kernel
     for delta in (0.001, 0.0025):
-        out = postprocess(c, NEAR, PostprocessParams(sigma=sigma, delta=delta))
+        out = postprocess(c, NEAR, replace(PAPER, sigma=sigma, delta=delta))
         reference = blurred(c, sigma)
         np.testing.assert_allclose(out, np.where(reference >= delta, reference, 0), atol=1e-7)
         assert out.max() == pytest.approx(reference.max()) and (out > 0).sum() == (reference >= delta).sum()
-    wide, narrow = ((postprocess(c, NEAR, PostprocessParams(sigma=sigma, delta=d)) > 0).sum() for d in (1e-4, 1e-3))
+    wide, narrow = ((postprocess(c, NEAR, replace(PAPER, sigma=sigma, delta=d)) > 0).sum() for d in (1e-4, 1e-3))
     assert wide > narrow  # a lower delta keeps more of the blur's tail
     # sigma 0 skips the blur: the impulse itself is the only component
-    assert (postprocess(c, NEAR, PostprocessParams(sigma=0)) == c).all()
+    assert (postprocess(c, NEAR, replace(PAPER, sigma=0)) == c).all()
 
 
 def test_an_all_zero_map_and_a_map_below_delta_become_zero():
     zero = np.zeros((H, W), np.float32)
     faint = np.full((H, W), 0.02, np.float32)  # blurred, still 0.02 < delta
-    out = postprocess(np.stack([zero, faint]), np.stack([NEAR, NEAR]), PostprocessParams())
+    out = postprocess(np.stack([zero, faint]), np.stack([NEAR, NEAR]), PAPER)
     assert out.shape == (2, H, W) and not out.any()
 
 
@@ -78,16 +85,16 @@ def test_a_batch_equals_its_maps_one_by_one():
     rng = np.random.default_rng(0)
     maps = cv2.GaussianBlur(rng.random((H, W, 5)).astype(np.float32), (0, 0), 3).transpose(2, 0, 1) ** 4
     depth = rng.uniform(0, 30, (5, H, W)).astype(np.float32)
-    batch = postprocess(maps, depth, PostprocessParams())
+    batch = postprocess(maps, depth, PAPER)
     for i in range(5):
-        np.testing.assert_array_equal(batch[i], postprocess(maps[i], depth[i], PostprocessParams()))
+        np.testing.assert_array_equal(batch[i], postprocess(maps[i], depth[i], PAPER))
 
 
 def test_bad_shapes_and_missing_depth_are_refused():
     with pytest.raises(ValueError, match="stereo depth"):
-        postprocess(np.zeros((H, W)), None, PostprocessParams())
+        postprocess(np.zeros((H, W)), None, PAPER)
     with pytest.raises(ValueError, match="does not match"):
-        postprocess(np.zeros((2, H, W)), np.zeros((H, W)), PostprocessParams())
+        postprocess(np.zeros((2, H, W)), np.zeros((H, W)), PAPER)
 
 
 def test_nearest_pixel_to_the_bottom_centre_matches_a_brute_force_search():

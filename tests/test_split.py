@@ -17,9 +17,10 @@ def frames_along(sequences: int, count: int, spacing_m: float) -> list[Frame]:
     return [Frame(f"s{s}", i, i * spacing_m) for s in range(sequences) for i in range(count)]
 
 
-def test_grouped_split_leaves_no_neighbour_in_training():
+def test_grouped_split_leaves_no_neighbour_in_training(compose_config):
     frames = frames_along(3, 100, 2.0)
-    parts, guarded = split_frames(frames, test_fraction=0.1, val_fraction=0.1, block_m=20.0, guard_m=10.0, seed=3)
+    c = compose_config("split.test_fraction=0.1", "split.val_fraction=0.1", "split.block_m=20", "split.guard_m=10", "split.seed=3").split
+    parts, guarded = split_frames(frames, c)
     assert 30 <= len(parts["test"]) <= 40 and 30 <= len(parts["val"]) <= 40
     assert guarded > 0 and len(parts["train"]) + len(parts["test"]) + len(parts["val"]) + guarded == 300
     for held in parts["test"] + parts["val"]:
@@ -30,23 +31,23 @@ def test_grouped_split_leaves_no_neighbour_in_training():
     for name, part in parts.items():
         for f in part:
             assert side[(f.sequence, int(f.travelled_m // 20))] == name
-    again, _ = split_frames(frames, test_fraction=0.1, val_fraction=0.1, block_m=20.0, guard_m=10.0, seed=3)
+    again, _ = split_frames(frames, c)
     assert again == parts
 
 
-def test_random_split_is_the_papers_and_warns(caplog):
+def test_random_split_is_the_papers_and_warns(compose_config, caplog):
     frames = frames_along(1, 100, 2.0)
     with caplog.at_level(logging.WARNING):
-        parts, guarded = split_frames(frames, strategy="random", seed=0)
+        parts, guarded = split_frames(frames, compose_config("split.strategy=random", "split.seed=0").split)
     assert "near-duplicate" in caplog.text and guarded == 0
     assert (len(parts["test"]), len(parts["val"]), len(parts["train"])) == (10, 10, 80)
     train = {f.travelled_m for f in parts["train"]}
     assert any(abs(f.travelled_m - t) <= 2.0 for f in parts["test"] for t in train)  # neighbours leak
 
 
-def test_unknown_strategy_lists_valid_ones():
+def test_unknown_strategy_lists_valid_ones(compose_config):
     with pytest.raises(ValueError, match="valid: grouped, random"):
-        split_frames(frames_along(1, 10, 2.0), strategy="kfold")
+        split_frames(frames_along(1, 10, 2.0), compose_config("split.strategy=kfold").split)
 
 
 def test_split_stage_writes_manifests_with_mirrored_pairs(compose_config, labelled_drive, tmp_path):

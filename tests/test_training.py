@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 import torch
 
-from offroad_path.models import build_model
+from offroad_path.models import MODELS, build_model
 from offroad_path.pretrain import pretrain
 from offroad_path.train import train
 from offroad_path.training.pretrained import from_imagenet_vgg, from_segmentation
 
 
-@pytest.mark.parametrize("model", ["segnet", "fcn", "unet"])
+@pytest.mark.parametrize("model", list(MODELS))
 def test_fast_dev_run_trains_tests_and_writes_confidence_maps(compose_config, split_dir, tmp_path, model, tiny_config):
     metrics = train(tiny_config(tmp_path, f"model={model}", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
     assert 0.0 <= metrics["test/iou"] <= 1.0

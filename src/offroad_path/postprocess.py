@@ -31,7 +31,7 @@ BATCH = 64  # maps in memory at once
 
 def run_postprocess(cfg: DictConfig) -> int:
     c = cfg.postprocess
-    params = PostprocessParams(c.max_depth_m, c.sigma, c.delta, c.use_depth)
+    params = PostprocessParams.from_config(c)
     out_dir = Path(c.out_dir)
     check_output_dir(out_dir, "postprocess.out_dir", [c.predictions_dir])
     rows = read_predictions_manifest(Path(c.predictions_dir) / "manifest.csv")

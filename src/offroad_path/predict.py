@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -48,7 +49,7 @@ def run_predict(cfg: DictConfig) -> dict:
             (confidence,) = model([frame.image])
             model_seconds += time.perf_counter() - t0
             if p.postprocess:
-                params = PostprocessParams(pp.max_depth_m, pp.sigma, pp.delta, use_depth=frame.depth is not None)
+                params = replace(PostprocessParams.from_config(pp), use_depth=pp.use_depth and frame.depth is not None)
                 confidence = postprocess(confidence, frame.depth, params)
             shown = tint(frame.image, confidence > p.threshold)
             cv2.imwrite(str(tmp / "confidence" / f"{frame.name}.png"), np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))

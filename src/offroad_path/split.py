@@ -51,7 +51,7 @@ def split(cfg: DictConfig) -> dict:
     frames, samples = labelled_frames(Path(c.labels_dir))
     if not frames:
         raise ValueError(f"{c.labels_dir}: holds no labels to split")
-    parts, guarded = split_frames(frames, c.strategy, c.test_fraction, c.val_fraction, c.block_m, c.guard_m, c.seed)
+    parts, guarded = split_frames(frames, c)
     counts = {}
     listed = [c.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
     recordings = sorted({str(Path(sample.image).parents[1]) for sample in samples.values()})  # <sequence>/image_l/NNNNNN.png

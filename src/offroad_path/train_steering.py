@@ -62,8 +62,8 @@ def train_steering(cfg: DictConfig) -> dict:
     check_output_dir(s.out_dir, "steering.out_dir", inputs)
     L.seed_everything(s.seed, workers=True)
     parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror)
-    data = SteeringDataModule(parts, s.width, s.height, s.batch_size, s.jitter, s.seed)
-    task = SteeringTask(s.width, s.height, s.lr, s.lr_step_epochs, s.lr_gamma, s.momentum, s.weight_decay)
+    data = SteeringDataModule(parts, s)
+    task = SteeringTask.from_config(s)
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs")
     identity = {
         "stage": "train_steering", "block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import lightning as L
+from omegaconf import DictConfig
 from torch.utils.data import DataLoader
 
 from offroad_path.data.dataset import EpochSampler, ManifestDataset, transforms
@@ -14,13 +15,20 @@ from offroad_path.data.manifest import Sample, read_manifest
 class OffroadDataModule(L.LightningDataModule):
     """train / val / test loaders for target 'path' (2 classes) or 'semantic' (8 classes)."""
 
-    def __init__(self, split_dir: str, target: str = "path", width: int = 512, height: int = 288, batch_size: int = 6,
-                 num_workers: int = 0, pin_memory: bool = False, augment: bool = True, jitter: float = 0.2,
-                 min_scale: float = 0.8, seed: int = 0):  # fmt: skip
+    # Each argument is a hyper-parameter saved flat in the checkpoint (predict reads the input size
+    # from it); build one from config with from_config.
+    def __init__(self, *, split_dir: str, target: str, width: int, height: int, batch_size: int,  # noqa: PLR0913
+                 num_workers: int, pin_memory: bool, augment: bool, jitter: float, min_scale: float, seed: int):  # fmt: skip
         super().__init__()
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
         self.split_dir = Path(split_dir)
         self.samples: dict[str, list[Sample]] = {}
+
+    @classmethod
+    def from_config(cls, data: DictConfig, target: str, seed: int) -> OffroadDataModule:
+        """From the `data` config node (conf/data/default.yaml) for target 'path' or 'semantic'."""
+        settings = ("width", "height", "batch_size", "num_workers", "pin_memory", "augment", "jitter", "min_scale")
+        return cls(split_dir=data.split_dir, target=target, **{k: data[k] for k in settings}, seed=seed)
 
     def setup(self, stage: str | None = None) -> None:
         """Read the manifests and check that every file they list exists, before any training."""

@@ -10,8 +10,12 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from offroad_path.config import SplitConfig
 
 log = logging.getLogger(__name__)
 STRATEGIES = ("grouped", "random")
@@ -24,20 +28,14 @@ class Frame:
     travelled_m: float  # position along the sequence's driven path at f0
 
 
-def split_frames(
-    frames: list[Frame],
-    strategy: str = "grouped",
-    test_fraction: float = 0.1,
-    val_fraction: float = 0.1,
-    block_m: float = 20.0,
-    guard_m: float = 10.0,
-    seed: int = 0,
-) -> tuple[dict[str, list[Frame]], int]:
-    """({'train': [...], 'val': [...], 'test': [...]}, number of training frames left out as guard)."""
-    if strategy not in STRATEGIES:
-        raise ValueError(f"unknown split strategy {strategy!r}; valid: {', '.join(STRATEGIES)}")
-    rng = np.random.default_rng(seed)
-    if strategy == "random":
+def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Frame]], int]:
+    """({'train': [...], 'val': [...], 'test': [...]}, number of training frames left out as guard),
+    by the `split` settings (strategy, test_fraction, val_fraction, block_m, guard_m, seed)."""
+    if c.strategy not in STRATEGIES:
+        raise ValueError(f"unknown split strategy {c.strategy!r}; valid: {', '.join(STRATEGIES)}")
+    rng = np.random.default_rng(c.seed)
+    test_fraction, val_fraction, block_m = c.test_fraction, c.val_fraction, c.block_m
+    if c.strategy == "random":
         log.warning("split strategy 'random' (the paper's per-image split) puts near-duplicate neighbours in train and test")
         order = rng.permutation(len(frames))
         n_test, n_val = round(test_fraction * len(frames)), round(val_fraction * len(frames))
@@ -61,7 +59,7 @@ def split_frames(
     held_out: dict[str, np.ndarray] = {}
     for frame in split["test"] + split["val"]:
         held_out.setdefault(frame.sequence, []).append(frame.travelled_m)
-    train = [f for f in split["train"] if not _near(f, held_out, guard_m)]
+    train = [f for f in split["train"] if not _near(f, held_out, c.guard_m)]
     guarded = len(split["train"]) - len(train)
     split["train"] = train
     for name in split:

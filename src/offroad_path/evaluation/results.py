@@ -14,8 +14,6 @@ from offroad_path.data.dataset import read
 from offroad_path.data.manifest import Sample
 from offroad_path.evaluation.metrics import Scores, counts, per_image_iou, pooled
 
-NETWORKS = {"segnet": "SegNet", "fcn": "FCN", "unet": "U-Net"}
-
 
 @dataclass(frozen=True)
 class ResultRow:
@@ -38,7 +36,10 @@ def split_run_name(run: str) -> tuple[str, str]:
 
 
 def network_name(model: str) -> str:
-    return NETWORKS.get(model, model)
+    """The registered network's title ('unet' -> 'U-Net')."""
+    from offroad_path.models import MODELS
+
+    return (MODELS[model].title if model in MODELS else "") or model
 
 
 def load_labels(samples: list[Sample]) -> np.ndarray:

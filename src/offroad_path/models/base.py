@@ -41,6 +41,7 @@ class SegmentationNet(nn.Module):
     """
 
     stride = 32
+    title = ""  # the name the results table prints ("U-Net"); the registry key when empty
 
     def __init__(self, num_classes: int):
         super().__init__()

@@ -27,6 +27,8 @@ def bilinear_kernel(channels: int, size: int) -> torch.Tensor:
 
 
 class FCN8s(SegmentationNet):
+    title = "FCN"
+
     def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3, dropout: float = 0.5):
         super().__init__(num_classes)
         stages = [[scaled(c, width) for c in stage] for stage in VGG16]

@@ -17,6 +17,8 @@ VGG16 = ((64, 64), (128, 128), (256, 256, 256), (512, 512, 512), (512, 512, 512)
 
 
 class SegNet(SegmentationNet):
+    title = "SegNet"
+
     def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3):
         super().__init__(num_classes)
         stages = [[scaled(c, width) for c in stage] for stage in VGG16]

@@ -22,6 +22,7 @@ def double_conv(cin: int, cout: int, batch_norm: bool) -> nn.Sequential:
 
 
 class UNet(SegmentationNet):
+    title = "U-Net"
     stride = 16
 
     def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3, batch_norm: bool = True):

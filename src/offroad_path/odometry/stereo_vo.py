@@ -14,27 +14,28 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from omegaconf import MISSING
 
 from offroad_path.sequence.calibration import StereoCalibration
 
 
 @dataclass
 class OdometryConfig:
-    max_features: int = 800
-    bucket_rows: int = 6
-    bucket_cols: int = 8
-    corner_quality: float = 0.005  # corners weaker than this fraction of the strongest are ignored
-    lk_window: int = 11  # small windows: less perspective distortion of slanted ground between views
-    lk_levels: int = 4
-    max_row_error_px: float = 1.0  # stereo matches must stay on the same row (rectified)
-    min_disparity_px: float = 0.5
-    max_depth_m: float = 60.0
-    forward_backward_px: float = 1.0
-    ransac_reprojection_px: float = 1.0
-    ransac_iterations: int = 200
-    refine_iterations: int = 6
-    huber_px: float = 1.0
-    min_inliers: int = 40
+    max_features: int = MISSING
+    bucket_rows: int = MISSING
+    bucket_cols: int = MISSING
+    corner_quality: float = MISSING  # corners weaker than this fraction of the strongest are ignored
+    lk_window: int = MISSING  # small windows: less perspective distortion of slanted ground between views
+    lk_levels: int = MISSING
+    max_row_error_px: float = MISSING  # stereo matches must stay on the same row (rectified)
+    min_disparity_px: float = MISSING
+    max_depth_m: float = MISSING
+    forward_backward_px: float = MISSING
+    ransac_reprojection_px: float = MISSING
+    ransac_iterations: int = MISSING
+    refine_iterations: int = MISSING
+    huber_px: float = MISSING
+    min_inliers: int = MISSING
 
 
 @dataclass
@@ -61,8 +62,8 @@ class _Frame:
 class StereoOdometry:
     """Frame-to-frame stereo odometry; feed grey frames in order with `step`."""
 
-    def __init__(self, calibration: StereoCalibration, cfg: OdometryConfig | None = None):
-        self.cfg = cfg or OdometryConfig()
+    def __init__(self, calibration: StereoCalibration, cfg: OdometryConfig):
+        self.cfg = cfg
         self.K = calibration.K
         self.fx, self.fy = calibration.K[0, 0], calibration.K[1, 1]
         self.cx, self.cy = calibration.K[0, 2], calibration.K[1, 2]

@@ -24,7 +24,7 @@ class OdometryRun:
         return np.array([not s.ok for s in self.steps], bool)
 
 
-def run_odometry(sequence: Sequence, cfg: OdometryConfig | None = None) -> OdometryRun:
+def run_odometry(sequence: Sequence, cfg: OdometryConfig) -> OdometryRun:
     vo = StereoOdometry(sequence.calibration, cfg)
     vo.start(sequence.load_left(0, grey=True), sequence.load_right(0, grey=True))
     poses = [np.eye(4)]

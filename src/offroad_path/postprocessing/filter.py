@@ -14,6 +14,7 @@ than a loop over maps (the transposes cost more than the calls).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -21,10 +22,15 @@ import numpy as np
 
 @dataclass(frozen=True)
 class PostprocessParams:
-    max_depth_m: float = 20.0  # D
-    sigma: float = 6.0  # Gaussian blur, pixels at the map's resolution
-    delta: float = 0.025  # confidence below this is set to 0
-    use_depth: bool = True  # False: skip step 1 (no stereo depth, e.g. monocular footage)
+    max_depth_m: float  # D
+    sigma: float  # Gaussian blur, pixels at the map's resolution
+    delta: float  # confidence below this is set to 0
+    use_depth: bool  # False: skip step 1 (no stereo depth, e.g. monocular footage)
+
+    @classmethod
+    def from_config(cls, c: Any) -> PostprocessParams:
+        """The settings of a `postprocess` config node (conf/postprocess/default.yaml)."""
+        return cls(c.max_depth_m, c.sigma, c.delta, c.use_depth)
 
 
 def nearest_to_bottom_centre(support: np.ndarray) -> tuple[int, int] | None:

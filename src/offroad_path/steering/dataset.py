@@ -8,6 +8,7 @@ import lightning as L
 import numpy as np
 import torch
 from albumentations.pytorch import ToTensorV2
+from omegaconf import DictConfig
 from torch.utils.data import DataLoader, Dataset
 
 from offroad_path.data.dataset import EpochSampler, read
@@ -43,15 +44,18 @@ class SteeringDataset(Dataset):
 
 
 class SteeringDataModule(L.LightningDataModule):
-    def __init__(self, parts: dict[str, list[SteeringFrame]], width: int, height: int, batch_size: int, jitter: float, seed: int):
+    """train / val / test loaders of the steering frames, by the `steering` settings (width, height,
+    batch_size, jitter, seed)."""
+
+    def __init__(self, parts: dict[str, list[SteeringFrame]], s: DictConfig):
         super().__init__()
-        self.parts = parts
-        self.width, self.height, self.batch_size, self.jitter, self.seed = width, height, batch_size, jitter, seed
+        self.parts, self.s = parts, s
 
     def _loader(self, part: str, train: bool) -> DataLoader:
-        transform = steering_transforms(self.width, self.height, self.jitter if train else 0.0, self.seed)
+        s = self.s
+        transform = steering_transforms(s.width, s.height, s.jitter if train else 0.0, s.seed)
         dataset = SteeringDataset(self.parts[part], transform)
-        return DataLoader(dataset, self.batch_size, sampler=EpochSampler(len(dataset), self.seed) if train else None)
+        return DataLoader(dataset, s.batch_size, sampler=EpochSampler(len(dataset), s.seed) if train else None)
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train", train=True)

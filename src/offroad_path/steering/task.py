@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
+from omegaconf import DictConfig
 from torchmetrics import MeanAbsoluteError
 
 from offroad_path.steering.pilotnet import PilotNet
@@ -14,11 +15,17 @@ from offroad_path.training.task import BaseTask
 class SteeringTask(BaseTask):
     monitor, mode = "val/mae", "min"
 
-    def __init__(self, width: int = 256, height: int = 136, lr: float = 2e-4, lr_step_epochs: int = 0, lr_gamma: float = 0.1,
-                 momentum: float = 0.9, weight_decay: float = 0.0):  # fmt: skip
+    # Hyper-parameters saved flat in the checkpoint; build one from config with from_config.
+    def __init__(self, *, width: int, height: int, lr: float, lr_step_epochs: int, lr_gamma: float,  # noqa: PLR0913
+                 momentum: float, weight_decay: float):  # fmt: skip
         super().__init__()
         self.save_hyperparameters()
         self.configure()
+
+    @classmethod
+    def from_config(cls, s: DictConfig) -> SteeringTask:
+        """From the `steering` config node (conf/steering/default.yaml)."""
+        return cls(**{k: s[k] for k in ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")})
 
     def configure_models(self) -> None:
         self.model = PilotNet(self.hparams.width, self.hparams.height)

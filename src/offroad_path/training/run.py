@@ -237,11 +237,9 @@ def fit_segmentation(
     check_output_dir(out_dir, f"{stage}.out_dir", inputs)
     L.seed_everything(cfg.train.seed, workers=True)
     d, m, t = cfg.data, cfg.model, cfg.trainer
-    data = OffroadDataModule(
-        d.split_dir, target, d.width, d.height, d.batch_size, d.num_workers, d.pin_memory, d.augment, d.jitter, d.min_scale, cfg.train.seed
-    )
+    data = OffroadDataModule.from_config(d, target, cfg.train.seed)
     data.setup()  # every listed file exists, before any training
-    task = SegmentationTask(m.name, num_classes, m.width, m.lr, m.lr_step_epochs, m.lr_gamma, m.momentum, m.weight_decay, t.channels_last)
+    task = SegmentationTask.from_config(m, num_classes, t.channels_last)
     loaded = initialise(task.model, pretraining, cfg.pretraining, m.name, m.width)
     if loaded:
         log.info("initialised %d parameter tensors from %s pretraining", len(loaded), pretraining)

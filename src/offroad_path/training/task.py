@@ -6,6 +6,7 @@ from __future__ import annotations
 import lightning as L
 import torch
 import torch.nn.functional as F
+from omegaconf import DictConfig
 from torchmetrics import MetricCollection
 from torchmetrics.classification import (
     BinaryAccuracy,
@@ -61,21 +62,30 @@ class BaseTask(L.LightningModule):
 class SegmentationTask(BaseTask):
     monitor, mode = "val/iou", "max"
 
-    def __init__(
+    # Each argument is a hyper-parameter saved flat in the checkpoint, which TorchModel rebuilds
+    # the task from; build one from config with from_config.
+    def __init__(  # noqa: PLR0913
         self,
+        *,
         model: str,
-        num_classes: int = 2,
-        width: float = 1.0,
-        lr: float = 1e-3,
-        lr_step_epochs: int = 0,
-        lr_gamma: float = 0.1,
-        momentum: float = 0.9,
-        weight_decay: float = 5e-4,
-        channels_last: bool = False,
+        num_classes: int,
+        width: float,
+        lr: float,
+        lr_step_epochs: int,
+        lr_gamma: float,
+        momentum: float,
+        weight_decay: float,
+        channels_last: bool,
     ):
         super().__init__()
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
         self.configure()
+
+    @classmethod
+    def from_config(cls, model: DictConfig, num_classes: int, channels_last: bool) -> SegmentationTask:
+        """From a `model` config node (conf/model/<name>.yaml)."""
+        optimiser = {k: model[k] for k in ("lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")}
+        return cls(model=model.name, num_classes=num_classes, width=model.width, **optimiser, channels_last=channels_last)
 
     def configure_models(self) -> None:
         self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width)

@@ -8,7 +8,6 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any
 
 import hydra
@@ -58,13 +57,10 @@ def run_stage(stage: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
         return stage(cfg)
 
 
-CONF_DIR = Path(__file__).resolve().parents[3] / "conf"
-
-
 def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
     """The Hydra entry point of a stage: the project's config, typed by its schemas, and clear
     errors on bad input."""
-    from offroad_path.config import register_configs
+    from offroad_path.config import CONF_DIR, register_configs
 
     register_configs()
 

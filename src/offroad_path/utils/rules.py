@@ -8,7 +8,7 @@ import math
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import MissingMandatoryValue
 
 
@@ -54,6 +54,17 @@ def one_of(choices: Iterable[str] | Callable[[], Iterable[str]]) -> dict:
         return sorted(choices() if callable(choices) else choices)
 
     return {"rule": Rule(lambda v: v in valid(), "")} | {"choices": valid}
+
+
+def each(inner: dict) -> dict:
+    """The inner rule on every item of a list (choices listed as the inner rule lists them)."""
+    check: Rule = inner["rule"]
+    return inner | {"rule": Rule(lambda v: all(check.test(x) for x in v), check.says)}
+
+
+def setting(rules: dict | None = None) -> Any:
+    """A config field: its value lives in conf/ (never here), its rules here."""
+    return dataclasses.field(default=MISSING, metadata=rules or {})
 
 
 def validate(cfg: DictConfig, schema: type, prefix: str = "") -> None:

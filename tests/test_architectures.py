@@ -1,0 +1,84 @@
+"""One list of networks: the registry (offroad_path.models.MODELS) is the truth, the pipeline's
+grid (conf/evaluate/default.yaml, dvc.yaml's `vars`) follows it, and adding a network is its
+module, one registry line, its config file and its name in the grid (docs/design.md, "Adding a network")."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+from helpers import ROOT, git
+from hydra import compose, initialize_config_dir
+from torch import nn
+
+from offroad_path.models import MODELS, SegmentationNet
+from offroad_path.train import train
+
+GRID = yaml.safe_load((ROOT / "conf" / "evaluate" / "default.yaml").read_text())
+
+
+def test_the_grid_lists_every_registered_network_and_each_has_a_config():
+    assert GRID["architectures"] == list(MODELS), "conf/evaluate/default.yaml `architectures` must list the registry's networks"
+    for name in MODELS:
+        assert yaml.safe_load((ROOT / "conf" / "model" / f"{name}.yaml").read_text())["name"] == name
+
+
+class TinyNet(SegmentationNet):
+    """A stand-in fourth network: one convolution (what a new module under models/ would hold)."""
+
+    title = "Tiny"
+
+    def __init__(self, num_classes: int = 2, width: float = 1.0):
+        super().__init__(num_classes)
+        self.classifier = nn.Conv2d(3, num_classes, 3, padding=1)
+
+    def forward_padded(self, x):
+        return self.classifier(x)
+
+    def head_parameters(self) -> list[str]:
+        return ["classifier.weight", "classifier.bias"]
+
+    def replace_head(self, num_classes: int) -> None:
+        self.classifier = nn.Conv2d(3, num_classes, 3, padding=1)
+
+
+def add_network_to(root: Path) -> None:
+    """What a user edits besides the module and the registry line: a config file and the grid."""
+    unet = (ROOT / "conf" / "model" / "unet.yaml").read_text()
+    (root / "conf" / "model" / "tiny.yaml").write_text(unet.replace("name: unet", "name: tiny"))
+    grid = root / "conf" / "evaluate" / "default.yaml"
+    grid.write_text(grid.read_text().replace("architectures: [segnet, fcn, unet]", "architectures: [segnet, fcn, unet, tiny]"))
+
+
+def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypatch, tmp_path, split_dir, tiny_overrides):
+    monkeypatch.setitem(MODELS, "tiny", TinyNet)  # the registry line
+    shutil.copytree(ROOT / "conf", tmp_path / "conf")
+    add_network_to(tmp_path)
+    with initialize_config_dir(str(tmp_path / "conf"), version_base="1.3"):
+        overrides = [
+            f"data.split_dir={split_dir}",
+            f"train.out_dir={tmp_path / 'run'}",
+            "trainer.fast_dev_run=true",
+            "mlflow.enabled=false",
+        ]
+        cfg = compose("config", overrides=[*tiny_overrides, "model=tiny", *overrides])
+    assert "tiny-none" in cfg.evaluate.runs and "tiny-segmentation" in cfg.evaluate.runs
+    assert 0 <= train(cfg)["test/iou"] <= 1
+    assert (tmp_path / "run" / "checkpoints" / "best.ckpt").is_file()
+
+    # DVC: the same edit gives the new network its pretrain, train and postprocess stages.
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    for item in ("conf", "dvc.yaml", ".dvcignore"):
+        (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
+    add_network_to(repo)
+    git(repo, "init", "-q")
+    subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
+    listed = subprocess.run([sys.executable, "-m", "dvc", "stage", "list", "--name-only"], cwd=repo, capture_output=True, text=True)
+    stages = set(listed.stdout.split())
+    new = {"pretrain@tiny", "train_scratch@tiny", "train_pretrained@tiny", "postprocess@tiny-none", "postprocess@tiny-segmentation"}
+    assert new <= stages, listed.stdout + listed.stderr
+    assert len(stages) == 5 + 4 * 5  # synthesize, label, split, evaluate, train_steering; 5 per network
