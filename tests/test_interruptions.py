@@ -106,7 +106,7 @@ def saved_epochs(out: Path) -> int:
 def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(split_dir, tiny_overrides, tmp_path):
     def args(out: Path) -> list[str]:
         return ["offroad_path.train", *tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={out / 'run'}", "model=unet",
-                "trainer.max_epochs=10", "trainer.patience=10", "mlflow.enabled=false"]  # fmt: skip
+                "trainer.max_epochs=10", "callbacks.early_stopping.patience=10", "mlflow.enabled=false"]  # fmt: skip
 
     reference = tmp_path / "reference"
     finish(args(reference))

@@ -10,9 +10,10 @@ import pytest
 import torch
 
 from offroad_path.data.manifest import read_manifest
+from offroad_path.geometry.path import distance_along
 from offroad_path.sequence.reader import open_sequence
 from offroad_path.steering.evaluation import error_by_magnitude, steering_metrics
-from offroad_path.steering.frames import steering_split, travelled
+from offroad_path.steering.frames import steering_split
 from offroad_path.steering.pilotnet import PilotNet, feature_size
 from offroad_path.train_steering import train_steering
 
@@ -46,7 +47,7 @@ def test_split_follows_the_path_split(compose_config, labelled_drive, split_dir)
     cfg = compose_config("split.block_m=4", "split.guard_m=3")
     parts = steering_split(labelled_drive, split_dir, cfg.split.block_m, cfg.split.guard_m, mirror=True)
     seq = open_sequence(json.loads((labelled_drive / "summary.json").read_text())["sequences"][0]["root"])
-    at = travelled(np.loadtxt(labelled_drive / "drive" / "poses_vo.txt").reshape(-1, 3, 4))
+    at = distance_along(np.loadtxt(labelled_drive / "drive" / "poses_vo.txt").reshape(-1, 3, 4))
     for part in ("val", "test"):
         # every held-out labelled frame of the path split is held out here too, in the same part
         held = {s.f0 for s in read_manifest(split_dir / f"{part}.csv")}

@@ -3,6 +3,7 @@ records runs (children of a sweep in a multirun), pretrained weights load or fai
 
 from __future__ import annotations
 
+import json
 import sqlite3
 import subprocess
 import sys
@@ -11,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import yaml
 
 from offroad_path.models import MODELS, build_model
 from offroad_path.pretrain import pretrain
@@ -75,6 +77,28 @@ def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path, tiny_o
     sweeps = {r for r, k, v in tags if k == "sweep_dir" and v == str(tmp_path / "sweep")}
     children = {r for r, k, v in tags if k == "mlflow.parentRunId" and v in sweeps}
     assert len(sweeps) == 1 and len(children) == 2
+
+
+def test_optuna_search_trains_each_trial_and_reports_the_best(split_dir, tmp_path, tiny_overrides):
+    sweep = tmp_path / "sweep"
+    tiny = [o for o in tiny_overrides if not o.startswith("model.width=")]  # the search sets the width
+    overrides = [*tiny, f"data.split_dir={split_dir}", "trainer.max_epochs=1", "mlflow.enabled=false", f"hydra.sweep.dir={sweep}",
+                 "hydra.sweeper.n_trials=2", "hydra.sweeper.sampler.n_startup_trials=1"]  # fmt: skip
+    run = subprocess.run([sys.executable, "-m", "offroad_path.train", "-m", "hparams_search=path_optuna", *overrides],
+                         capture_output=True, text=True, cwd=tmp_path)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    results = yaml.safe_load((sweep / "optimization_results.yaml").read_text())
+    assert set(results["best_params"]) == {"model.lr", "model.width"} and 0.0 <= results["best_value"] <= 1.0
+    trials = [json.loads((sweep / str(i) / "metrics.json").read_text()) for i in range(2)]
+    assert results["best_value"] == pytest.approx(max(t["best_val_iou"] for t in trials))
+    assert all((sweep / str(i) / "checkpoints" / "best.ckpt").is_file() for i in range(2))
+
+
+def test_a_search_for_a_metric_the_stage_does_not_return_says_so(split_dir, tmp_path, tiny_overrides):
+    overrides = [*tiny_overrides, f"data.split_dir={split_dir}", "trainer.fast_dev_run=true", "mlflow.enabled=false",
+                 f"train.out_dir={tmp_path / 'run'}", "optimized_metric=val_accuracy"]  # fmt: skip
+    run = subprocess.run([sys.executable, "-m", "offroad_path.train", *overrides], capture_output=True, text=True, cwd=tmp_path)
+    assert run.returncode == 2 and "optimized_metric=val_accuracy: this stage returned no such metric" in run.stderr
 
 
 def write_vgg(path: Path, batch_norm: bool, width: float = 1.0) -> None:

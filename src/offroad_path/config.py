@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
@@ -191,16 +192,18 @@ class PretrainingConfig:
 
 @dataclass
 class TrainerConfig:
+    """The arguments of lightning.pytorch.Trainer that conf/trainer sets (instantiated by the
+    training loop, which adds callbacks, logger and plugins)."""
+
+    _target_: str = MISSING
     max_epochs: int = setting(at_least(1))
     accelerator: str = MISSING
     devices: str = MISSING
     strategy: str = MISSING  # ddp across GPUs (trainer=ddp)
     num_nodes: int = MISSING
     precision: str = MISSING
-    channels_last: bool = MISSING
     deterministic: bool = MISSING
     log_every_n_steps: int = setting(at_least(1))
-    patience: int = setting(at_least(1))  # early stopping: epochs without a better validation IoU
     fast_dev_run: bool = MISSING
 
 
@@ -216,6 +219,7 @@ class TrainConfig:
     seed: int = MISSING
     resume: bool = MISSING  # continue an interrupted run from its last.ckpt (in .resume/ beside out_dir); false: start afresh
     sample_images: int = setting(at_least(0))  # validation predictions logged to MLflow each epoch
+    channels_last: bool = MISSING  # channels-last memory format (faster with GPU tensor cores)
 
 
 @dataclass
@@ -314,6 +318,10 @@ class Config:
     model: ModelConfig = field(default_factory=ModelConfig)
     pretraining: PretrainingConfig = field(default_factory=PretrainingConfig)
     trainer: TrainerConfig = field(default_factory=TrainerConfig)
+    # Lightning callbacks and logger, instantiated as written (conf/callbacks, conf/logger): free-form,
+    # so that a user can add any callback.
+    callbacks: Any = MISSING
+    logger: Any = MISSING
     train: TrainConfig = field(default_factory=TrainConfig)
     pretrain: PretrainConfig = field(default_factory=PretrainConfig)
     postprocess: PostprocessConfig = field(default_factory=PostprocessConfig)
@@ -323,6 +331,7 @@ class Config:
     export: ExportConfig = field(default_factory=ExportConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = MISSING
+    optimized_metric: str | None = MISSING  # the stage's metric a Hydra sweeper optimises (hparams_search)
 
 
 def validate_config(cfg) -> None:

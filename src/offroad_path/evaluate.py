@@ -17,7 +17,7 @@ from dataclasses import asdict
 from omegaconf import DictConfig
 
 from offroad_path.evaluation.report import Report, check_outputs, score_runs, write_report
-from offroad_path.evaluation.results import ResultRow, split_run_name
+from offroad_path.evaluation.tables import ResultRow, split_run_name
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.tracking import stage_run, tracking_uri
 

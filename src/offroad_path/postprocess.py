@@ -17,9 +17,8 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.data.dataset import load_depth
+from offroad_path.data.dataset import load_depth, load_maps
 from offroad_path.data.manifest import prediction_name, read_predictions_manifest, write_predictions_manifest
-from offroad_path.evaluation.results import load_maps
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
 from offroad_path.utils.cli import hydra_stage

@@ -20,13 +20,13 @@ import numpy as np
 from omegaconf import DictConfig
 from tqdm import tqdm
 
-from offroad_path.inference.overlay import tint
 from offroad_path.inference.runners import load_model
 from offroad_path.inference.sources import open_source
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.tracking import tracking_uri
+from offroad_path.viz import overlay
 
 log = logging.getLogger("offroad_path.predict")
 DEFAULT_FPS = 10.0
@@ -51,7 +51,7 @@ def run_predict(cfg: DictConfig) -> dict:
             if p.postprocess:
                 params = replace(PostprocessParams.from_config(pp), use_depth=pp.use_depth and frame.depth is not None)
                 confidence = postprocess(confidence, frame.depth, params)
-            shown = tint(frame.image, confidence > p.threshold)
+            shown = overlay(frame.image, confidence > p.threshold, outline=False)
             cv2.imwrite(str(tmp / "confidence" / f"{frame.name}.png"), np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
             cv2.imwrite(str(tmp / "overlay" / f"{frame.name}.png"), cv2.cvtColor(shown, cv2.COLOR_RGB2BGR))
             if source.kind != "folder":

@@ -9,7 +9,6 @@ Writes pretrain.out_dir (data/pretrain/<model>): checkpoints/best.ckpt and metri
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 from omegaconf import DictConfig
 
@@ -24,7 +23,7 @@ def pretrain(cfg: DictConfig) -> dict:
     if cfg.pretrain.max_epochs is not None:
         cfg = cfg.copy()
         cfg.trainer.max_epochs = cfg.pretrain.max_epochs
-    metrics = fit_segmentation(cfg, "pretrain", "semantic", len(CLASS_NAMES), Path(cfg.pretrain.out_dir), "none")
+    metrics = fit_segmentation(cfg, "pretrain", "semantic", len(CLASS_NAMES))
     log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])
     return metrics
 

@@ -12,13 +12,11 @@ import json
 import logging
 from pathlib import Path
 
-import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample, data_root, write_manifest
 from offroad_path.data.splitting import Frame, split_frames
-from offroad_path.sequence.poses import read_poses
-from offroad_path.sequence.reader import open_sequence
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
 from offroad_path.utils.cli import hydra_stage
 
@@ -27,20 +25,14 @@ log = logging.getLogger("offroad_path.split")
 
 def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int], Sample]]:
     """Every labelled f0 under labels_dir, with its position along the path and its sample row."""
-    summary_path = labels_dir / "summary.json"
-    if not summary_path.is_file():
-        raise FileNotFoundError(f"{summary_path}: missing (run the label stage first)")
     frames, samples = [], {}
-    for entry in json.loads(summary_path.read_text())["sequences"]:
-        name, seq = entry["name"], open_sequence(entry["root"])
-        poses_path = labels_dir / name / "poses_vo.txt"
-        poses = read_poses(poses_path, len(seq)) if poses_path.is_file() else seq.poses
-        travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))])
-        for label in sorted((labels_dir / name / "label").glob("*.png")):
+    for run in read_label_run(labels_dir):
+        name, seq, travelled = run.name, run.sequence, run.distance()
+        for label in run.labels():
             f0 = int(label.stem)
             frames.append(Frame(name, f0, float(travelled[f0])))
             semantic = str(seq.semantic[f0]) if seq.semantic is not None else ""
-            samples[(name, f0)] = Sample(name, f0, False, str(seq.left[f0]), str(label), str(labels_dir / name / "disparity" / label.name),
+            samples[(name, f0)] = Sample(name, f0, False, str(seq.left[f0]), str(label), str(run.folder / "disparity" / label.name),
                                          semantic, seq.calibration.fx, seq.calibration.baseline_m)  # fmt: skip
     return frames, samples
 

@@ -30,7 +30,7 @@ def train(cfg: DictConfig) -> dict:
         log.info("%d confidence maps in %s", written, out_dir / "predictions")
         return {}
 
-    metrics = fit_segmentation(cfg, "train", "path", 2, out_dir, cfg.pretraining.name, predictions)
+    metrics = fit_segmentation(cfg, "train", "path", 2, predictions)
     log.info("%s-%s: best validation IoU %s, test IoU %.4f", cfg.model.name, cfg.pretraining.name, metrics["best_val_iou"],
              metrics["test/iou"])  # fmt: skip
     return metrics

@@ -18,32 +18,17 @@ from pathlib import Path
 import lightning as L
 import numpy as np
 import torch
-from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
 from offroad_path.steering.frames import PARTS, steering_split
 from offroad_path.steering.task import SteeringTask
-from offroad_path.training.run import LENGTH_SETTINGS, RunSpec, fit
+from offroad_path.training.run import LENGTH_SETTINGS, RunSpec, fit, training_logger
 from offroad_path.utils.atomic import check_output_dir, write_text_atomic
 from offroad_path.utils.cli import hydra_stage
-from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 
 log = logging.getLogger("offroad_path.train_steering")
-
-
-def steering_logger(cfg: DictConfig) -> MLFlowLogger | None:
-    if not cfg.mlflow.enabled:
-        return None
-    tags = {"stage": "train_steering", "experiment_name": cfg.experiment_name, "model": "pilotnet"}
-    if parent := multirun_parent(cfg):
-        tags["mlflow.parentRunId"] = parent
-    experiment_id(cfg.mlflow)  # created with its artifact location
-    logger = MLFlowLogger(experiment_name=cfg.mlflow.experiment, run_name="train_steering pilotnet", tracking_uri=tracking_uri(cfg.mlflow),
-                          tags=tags)  # fmt: skip
-    logger.log_hyperparams(flatten(OmegaConf.to_container(cfg.steering, resolve=True), "steering."))
-    return logger
 
 
 def predict(task: SteeringTask, loader) -> tuple[np.ndarray, np.ndarray]:
@@ -69,10 +54,11 @@ def train_steering(cfg: DictConfig) -> dict:
         "stage": "train_steering", "block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,
         "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs},
         "trainer": {k: v for k, v in OmegaConf.to_container(t, resolve=True).items() if k not in LENGTH_SETTINGS},
+        "callbacks": OmegaConf.to_container(cfg.callbacks, resolve=True),
     }  # fmt: skip
     files = [Path(s.split_dir) / f"{part}.csv" for part in PARTS] + [Path(s.labels_dir) / "summary.json"]
-    spec = RunSpec("train_steering", Path(s.out_dir), inputs, s.seed, cfg.train.resume, s.max_epochs, s.patience, identity, files,
-                   out_key="steering.out_dir")  # fmt: skip
+    spec = RunSpec("train_steering", Path(s.out_dir), inputs, s.seed, cfg.train.resume, t, cfg.callbacks, s.max_epochs, identity, files,
+                   patience=s.patience, out_key="steering.out_dir")  # fmt: skip
     scored: dict[str, np.ndarray] = {}
 
     def write_predictions(task: SteeringTask, data: SteeringDataModule, tmp: Path) -> dict:
@@ -91,8 +77,8 @@ def train_steering(cfg: DictConfig) -> dict:
         scatter_plot(true, predicted, tmp / "scatter.png")
         return {**steering_metrics(true, predicted), "by_true_magnitude": bins}
 
-    logger = steering_logger(cfg)
-    results = fit(task, data, spec, t, logger, write_predictions)
+    logger = training_logger(cfg, "train_steering", "pilotnet", {"steering": OmegaConf.to_container(s, resolve=True)})
+    results = fit(task, data, spec, logger, write_predictions)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
     true, predicted = scored["true"], scored["predicted"]
     write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n")

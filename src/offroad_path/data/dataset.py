@@ -12,7 +12,8 @@ from albumentations.pytorch import ToTensorV2
 from torch.utils.data import Dataset, Sampler
 
 from offroad_path.data.manifest import Sample
-from offroad_path.labelling.disparity import decode_disparity, depth_from_disparity
+from offroad_path.geometry.path import mirror
+from offroad_path.geometry.stereo import decode_disparity, depth_from_disparity
 
 TARGETS = ("path", "semantic")
 
@@ -39,14 +40,31 @@ def load_sample(sample: Sample, target: str) -> tuple[np.ndarray, np.ndarray]:
     else:
         raise ValueError(f"unknown target {target!r}; valid: {', '.join(TARGETS)}")
     if sample.mirrored:
-        image, mask = image[:, ::-1], mask[:, ::-1]
+        image, mask = mirror(image), mirror(mask)
     return np.ascontiguousarray(image), np.ascontiguousarray(mask)
 
 
 def load_depth(sample: Sample) -> np.ndarray:
     """Stereo depth of the sample's frame (H, W) float32 metres, 0 unknown, mirrored with it."""
     depth = depth_from_disparity(decode_disparity(read(sample.disparity, cv2.IMREAD_UNCHANGED)), sample.fx, sample.baseline_m)
-    return np.ascontiguousarray(depth[:, ::-1]) if sample.mirrored else depth
+    return mirror(depth) if sample.mirrored else depth
+
+
+def load_labels(samples: list[Sample]) -> np.ndarray:
+    """Path labels (N, H, W) bool, mirrored where a sample says so."""
+    labels = [read(s.label, cv2.IMREAD_GRAYSCALE) > 0 for s in samples]
+    return np.stack([mirror(m) if s.mirrored else m for s, m in zip(samples, labels, strict=True)])
+
+
+def load_maps(paths: list[str]) -> np.ndarray:
+    """Confidence maps (N, H, W) float32 from .npy files (the train and postprocess stages' predictions)."""
+    maps = []
+    for path in paths:
+        try:
+            maps.append(np.load(path).astype(np.float32))
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{path}: not a readable confidence map ({e})") from e
+    return np.stack(maps)
 
 
 def transforms(width: int, height: int, augment: bool, jitter: float = 0.2, min_scale: float = 0.8, seed: int = 0) -> A.Compose:

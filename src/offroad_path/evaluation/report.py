@@ -11,20 +11,11 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.data.dataset import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases, save_png
-from offroad_path.evaluation.metrics import Scores, counts, mean_path, non_corresponding, pooled, precision_recall_curve
-from offroad_path.evaluation.results import (
-    ResultRow,
-    baseline_table,
-    csv_text,
-    load_labels,
-    load_maps,
-    markdown_table,
-    network_name,
-    score,
-    split_run_name,
-)
+from offroad_path.evaluation.metrics import Scores, counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
+from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, csv_text, markdown_table, network_name, split_run_name
 from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -46,6 +37,9 @@ class Report:
 
     def best_run(self, runs: list[str] | None = None) -> str:
         return max(runs or self.runs, key=lambda run: self.rows[run, "no"].iou)
+
+    def baseline_rows(self) -> list[BaselineRow]:
+        return [BaselineRow(baseline_name(key), s.accuracy, s.recall, s.precision, s.iou) for key, s in self.baselines.items()]
 
     def metrics(self) -> dict:
         """For metrics.json and MLflow: numbers only (rounded), None for undefined (JSON has no nan)."""
@@ -82,7 +76,12 @@ def score_runs(e: DictConfig) -> Report:
             if not len(labels):
                 labels = load_labels(report.samples)
             maps = load_maps(report.paths[run, pp])
-            report.rows[run, pp], report.per_image_iou[run, pp] = score(network_name(model), pretraining, pp, maps, labels, e.threshold)
+            per_image = counts(maps, labels, e.threshold)
+            ious, s = per_image_iou(per_image), pooled(per_image)
+            report.rows[run, pp] = ResultRow(
+                network_name(model), pretraining, pp, s.accuracy, s.recall, s.precision, s.iou, float(ious.mean())
+            )
+            report.per_image_iou[run, pp] = ious
             if pp == "no":
                 report.curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
                 report.baselines[f"non_corresponding.{run}"] = baseline(maps > e.threshold, labels, report.samples)
@@ -112,7 +111,7 @@ def write_report(e: DictConfig, report: Report) -> None:
             "# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
             "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(table) +
             "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
-            "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + baseline_table(report.baselines)
+            "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(report.baseline_rows())
         )  # fmt: skip
         (tmp / "results.csv").write_text(csv_text(table))
         save_png(tmp / "figures" / "good_and_bad_cases.png", cases_figure(report, e.figure_cases, e.figure_scale))

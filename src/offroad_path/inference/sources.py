@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.labelling.disparity import compute_disparity, depth_from_disparity, sgbm
+from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
 from offroad_path.sequence.reader import MAX_IMAGE_PIXELS, check_pixels, open_sequence, png_size
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")

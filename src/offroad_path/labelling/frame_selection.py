@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from offroad_path.geometry.path import distance_along
+
 STRATEGIES = ("midway", "stride")
 
 
@@ -27,7 +29,7 @@ def select_segments(
     moving = np.flatnonzero(steps > min_motion_m)
     if len(moving) == 0:
         return []
-    travelled = np.concatenate([[0.0], np.cumsum(steps)])
+    travelled = distance_along(positions)
     segments = []
     f0 = start = int(moving[0])
     while f0 < len(positions) - 1:

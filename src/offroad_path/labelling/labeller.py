@@ -11,7 +11,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.labelling.disparity import compute_disparity, depth_from_disparity, encode_disparity, sgbm
+from offroad_path.geometry.path import distance_along
+from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, encode_disparity, sgbm
 from offroad_path.labelling.footprint import VehicleFootprint, path_mask
 from offroad_path.labelling.frame_selection import select_segments
 from offroad_path.odometry.stereo_vo import OdometryConfig
@@ -99,7 +100,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     footprint = footprint_for(seq, cfg.footprint)
     poses, run = poses_for(seq, cfg)
     positions = poses[:, :3, 3]
-    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+    travelled = distance_along(positions)
     matcher = sgbm(cfg.disparity)
     K, size = seq.calibration.K, seq.image_size
     out_dir.mkdir()  # not parents: a worker must not re-create a stopped run's temporary folder

@@ -1,4 +1,4 @@
-"""Path labels drawn over the images they were made for.
+"""Path labels drawn over the images they were made for (the drawing: offroad_path.viz.overlay).
 
     python -m offroad_path.labelling.overlay SEQUENCE LABELS OUT.png [--frame F0]
 
@@ -12,23 +12,10 @@ import argparse
 from pathlib import Path
 
 import cv2
-import numpy as np
 
 from offroad_path.sequence.reader import open_sequence
 from offroad_path.utils.cli import clear_errors
-
-PATH_TINT = np.array([0, 255, 0], np.float32)
-
-
-def overlay(image: np.ndarray, mask: np.ndarray, alpha: float = 0.45) -> np.ndarray:
-    """RGB image with the path (mask > 0) tinted green and outlined."""
-    out = image.astype(np.float32)
-    path = mask > 0
-    out[path] = (1 - alpha) * out[path] + alpha * PATH_TINT
-    out = out.astype(np.uint8)
-    contours, _ = cv2.findContours(path.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    cv2.drawContours(out, contours, -1, (255, 255, 0), 1, cv2.LINE_AA)
-    return out
+from offroad_path.viz import overlay
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.geometry.path import path_length
 from offroad_path.odometry.stereo_vo import OdometryConfig, StepResult, StereoOdometry
 from offroad_path.sequence.reader import Sequence
 
@@ -50,7 +51,7 @@ def drift(estimate: np.ndarray, reference: np.ndarray, segment_m: float = 20.0) 
     from evo.core.trajectory import PosePath3D
     from evo.core.units import Unit
 
-    travelled = np.linalg.norm(np.diff(reference[:, :3, 3], axis=0), axis=1).sum()
+    travelled = path_length(reference)
     if travelled <= segment_m:
         return None, f"the true path is {travelled:.1f} m, not longer than one {segment_m:g} m segment"
     est, ref = PosePath3D(poses_se3=list(estimate)), PosePath3D(poses_se3=list(reference))

@@ -8,8 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
+from offroad_path.geometry.path import path_length
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.utils.cli import clear_errors
 
@@ -27,7 +26,7 @@ def describe(path: str) -> list[str]:
         w, h = seq.image_size
         travelled = "no poses"
         if seq.poses is not None:
-            travelled = f"{np.linalg.norm(np.diff(seq.poses[:, :3, 3], axis=0), axis=1).sum():.1f} m of poses"
+            travelled = f"{path_length(seq.poses):.1f} m of poses"
         extras = [
             name for name, value in (("depth", seq.depth), ("semantic", seq.semantic), ("steering", seq.steering)) if value is not None
         ]

@@ -5,13 +5,13 @@ from __future__ import annotations
 import albumentations as A
 import cv2
 import lightning as L
-import numpy as np
 import torch
 from albumentations.pytorch import ToTensorV2
 from omegaconf import DictConfig
 from torch.utils.data import DataLoader, Dataset
 
 from offroad_path.data.dataset import EpochSampler, read
+from offroad_path.geometry.path import mirror
 from offroad_path.steering.frames import SteeringFrame
 
 
@@ -39,7 +39,7 @@ class SteeringDataset(Dataset):
         frame = self.frames[i]
         image = cv2.cvtColor(read(frame.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
         if frame.mirrored:
-            image = np.ascontiguousarray(image[:, ::-1])
+            image = mirror(image)
         return {"image": self.transform(image=image)["image"], "steering": torch.tensor(frame.steering, dtype=torch.float32)}
 
 

@@ -8,16 +8,14 @@ same stretches of driving as the path networks, and never sees their neighbours 
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import read_manifest
-from offroad_path.sequence.poses import read_poses
-from offroad_path.sequence.reader import open_sequence
 
 log = logging.getLogger(__name__)
 PARTS = ("train", "val", "test")
@@ -32,29 +30,21 @@ class SteeringFrame:
     mirrored: bool = False
 
 
-def travelled(poses: np.ndarray) -> np.ndarray:
-    """Distance driven (m) at each frame of (N, 4, 4) camera poses."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1))])
-
-
 def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: float, mirror: bool) -> dict[str, list[SteeringFrame]]:
     """{'train', 'val', 'test'}: frames of every labelled sequence that has steering.txt."""
-    summary_path = labels_dir / "summary.json"
-    if not summary_path.is_file():
-        raise FileNotFoundError(f"{summary_path}: missing (run the label stage first)")
+    runs = read_label_run(labels_dir)
     held_out_part = {}  # (sequence, f0) -> 'val' | 'test'
     for part in ("val", "test"):
         for sample in read_manifest(split_dir / f"{part}.csv"):
             held_out_part[sample.sequence, sample.f0] = part
     parts: dict[str, list[SteeringFrame]] = {p: [] for p in PARTS}
     skipped, guarded = [], 0
-    for entry in json.loads(summary_path.read_text())["sequences"]:
-        name, seq = entry["name"], open_sequence(entry["root"])
+    for run in runs:
+        name, seq = run.name, run.sequence
         if seq.steering is None:
             skipped.append(name)
             continue
-        poses_path = labels_dir / name / "poses_vo.txt"
-        at = travelled(read_poses(poses_path, len(seq)) if poses_path.is_file() else seq.poses)
+        at = run.distance()
         blocks = (at // block_m).astype(int)
         block_part = {blocks[f0]: part for (s, f0), part in held_out_part.items() if s == name}
         part_of = [block_part.get(b, "train") for b in blocks]

@@ -19,14 +19,14 @@ import lightning as L
 import numpy as np
 import torch
 import torch.nn.functional as F
-from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
+from hydra.utils import instantiate
+from lightning.pytorch.callbacks import ModelCheckpoint
 from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.data.datamodule import OffroadDataModule
 from offroad_path.data.dataset import load_sample, transforms
 from offroad_path.data.manifest import prediction_name, write_predictions_manifest
-from offroad_path.labelling.overlay import overlay
 from offroad_path.training.checkpoints import (
     CONFIG_HASH,
     AtomicCheckpointIO,
@@ -37,10 +37,10 @@ from offroad_path.training.checkpoints import (
     save_weights,
 )
 from offroad_path.training.pretrained import initialise
-from offroad_path.training.task import SegmentationTask
+from offroad_path.training.task import BaseTask, SegmentationTask
 from offroad_path.utils.atomic import MARKER, atomic_directory, check_output_dir, owned
 from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
-from offroad_path.world.preview import colour_semantic
+from offroad_path.viz import colour_semantic, overlay
 
 log = logging.getLogger(__name__)
 
@@ -71,18 +71,21 @@ class LogSamples(L.Callback):
         )
 
 
-def mlflow_logger(cfg: DictConfig, stage: str) -> MLFlowLogger | None:
+def training_logger(cfg: DictConfig, stage: str, model: str, params: dict) -> MLFlowLogger | None:
+    """The run's Lightning logger from conf/logger, tagged with its stage and model, a child of
+    its sweep in a multirun, with `params` logged; None when mlflow.enabled is false."""
     if not cfg.mlflow.enabled:
         return None
-    tags = {"stage": stage, "experiment_name": cfg.experiment_name, "model": cfg.model.name, "pretraining": cfg.pretraining.name}
-    parent = multirun_parent(cfg)
-    if parent:
+    tags = {"stage": stage, "experiment_name": cfg.experiment_name, "model": model}
+    if stage != "train_steering":
+        tags["pretraining"] = cfg.pretraining.name
+    if parent := multirun_parent(cfg):
         tags["mlflow.parentRunId"] = parent
     # The tracking URI is always explicit: Lightning's logger would otherwise fall back to ./mlruns.
     experiment_id(cfg.mlflow)  # created with its artifact location, which the logger would not set
-    logger = MLFlowLogger(experiment_name=cfg.mlflow.experiment, run_name=f"{stage} {cfg.model.name}-{cfg.pretraining.name}",
-                          tracking_uri=tracking_uri(cfg.mlflow), tags=tags)  # fmt: skip
-    logger.log_hyperparams(flatten(OmegaConf.to_container(cfg, resolve=True)))
+    run_name = f"{stage} {model}" if stage == "train_steering" else f"{stage} {model}-{cfg.pretraining.name}"
+    logger = instantiate(cfg.logger, run_name=run_name, tracking_uri=tracking_uri(cfg.mlflow), tags=tags)
+    logger.log_hyperparams(flatten(params))
     return logger
 
 
@@ -127,11 +130,13 @@ class RunSpec:
     inputs: list[str]  # folders and files out_dir must not overlap
     seed: int
     resume: bool
+    trainer: DictConfig  # conf/trainer: instantiated with the run's callbacks, logger and max_epochs
+    callbacks: DictConfig  # conf/callbacks: each instantiated; early stopping gets the task's monitor and mode
     max_epochs: int
-    patience: int
     identity: dict  # every setting that changes what the run computes
     files: list[Path] = field(default_factory=list)  # inputs whose bytes are part of its identity
-    callbacks: list[L.Callback] = field(default_factory=list)
+    extra_callbacks: list[L.Callback] = field(default_factory=list)
+    patience: int | None = None  # early stopping's patience instead of the one in conf/callbacks
     out_key: str = ""  # the config key of out_dir, for messages (default: <stage>.out_dir)
 
 
@@ -168,13 +173,26 @@ def resume_checkpoint(work: Path, key: str, resume: bool) -> str | None:
     return str(last)
 
 
+def callbacks_from(spec: RunSpec, task: BaseTask) -> list[L.Callback]:
+    """conf/callbacks instantiated, early stopping following the task's validation metric."""
+    made = []
+    for name, node in spec.callbacks.items():
+        extra: dict = {}
+        if OmegaConf.select(node, "_target_", default="").endswith("EarlyStopping"):
+            extra = {"monitor": task.monitor, "mode": task.mode} | ({"patience": spec.patience} if spec.patience else {})
+        try:
+            made.append(instantiate(node, **extra))
+        except Exception as e:  # Hydra wraps the callback's own error
+            raise ValueError(f"callbacks.{name}: cannot be built ({e})") from e
+    return made
+
+
 def fit(
-    task: L.LightningModule,
+    task: BaseTask,
     data: L.LightningDataModule,
     spec: RunSpec,
-    trainer_cfg: DictConfig,
     logger: MLFlowLogger | None,
-    write_more: Callable[[L.LightningModule, L.LightningDataModule, Path], dict] | None = None,
+    write_more: Callable[[BaseTask, L.LightningDataModule, Path], dict] | None = None,
 ) -> dict:
     """Train `task` (early stopping on task.monitor), test its best weights, and write spec.out_dir
     atomically: checkpoints/best.ckpt (weights and hyper-parameters only), metrics.json, and
@@ -185,11 +203,10 @@ def fit(
     `dvc repro`, which deletes outputs before a stage runs) resumes there when spec.resume, and
     the resumed run ends exactly as an uninterrupted one (per-epoch seeding and sampling).
     """
-    t = trainer_cfg
     key = run_key(spec.identity, spec.files)
     work = spec.out_dir.parent / ".resume" / f"{spec.out_dir.name}-{key}"
     resume = resume_checkpoint(work, key, spec.resume)
-    if not t.fast_dev_run:
+    if not spec.trainer.fast_dev_run:
         work.mkdir(parents=True, exist_ok=True)
         (work / MARKER).write_text(f"{spec.stage} resume\n")
         warnings.filterwarnings("ignore", message="Checkpoint directory .* exists and is not empty")  # the marker, or a resume
@@ -198,12 +215,10 @@ def fit(
     best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
     # Lightning's save_last writes only when the best changes; a resume wants every epoch's end.
     latest = ModelCheckpoint(dirpath=work, filename="last", enable_version_counter=False)
-    trainer = L.Trainer(
-        max_epochs=spec.max_epochs, accelerator=t.accelerator, devices=t.devices, strategy=t.strategy, num_nodes=t.num_nodes,
-        precision=t.precision, deterministic=t.deterministic, log_every_n_steps=t.log_every_n_steps, fast_dev_run=t.fast_dev_run,
-        callbacks=[best, latest, EarlyStopping(task.monitor, mode=task.mode, patience=spec.patience), SeedEachEpoch(spec.seed),
-                   StampConfig(key), *spec.callbacks],
-        plugins=[AtomicCheckpointIO()], logger=logger if logger is not None else False, default_root_dir=work, enable_progress_bar=False,
+    trainer: L.Trainer = instantiate(
+        spec.trainer, max_epochs=spec.max_epochs, logger=logger if logger is not None else False, default_root_dir=work,
+        callbacks=[best, latest, *callbacks_from(spec, task), SeedEachEpoch(spec.seed), StampConfig(key), *spec.extra_callbacks],
+        plugins=[AtomicCheckpointIO()], enable_progress_bar=False,
     )  # fmt: skip
     trainer.fit(task, data, ckpt_path=resume, weights_only=True)
     if best.best_model_path:
@@ -228,18 +243,19 @@ def fit_segmentation(
     stage: str,
     target: str,
     num_classes: int,
-    out_dir: Path,
-    pretraining: str,
     write_more: Callable[[SegmentationTask, OffroadDataModule, Path], dict] | None = None,
 ) -> dict:
-    """The pretrain and train stages' run: a segmentation network on the split's manifests (see fit)."""
+    """The pretrain and train stages' run: a segmentation network on the split's manifests, into
+    `<stage>.out_dir`, from `pretraining` when the stage is train (see fit)."""
+    out_dir = Path(cfg[stage].out_dir)
+    pretraining = cfg.pretraining.name if stage == "train" else "none"
     inputs = [cfg.data.split_dir] + ([cfg.pretraining.checkpoint] if stage == "train" and cfg.pretraining.checkpoint else [])
     check_output_dir(out_dir, f"{stage}.out_dir", inputs)
     L.seed_everything(cfg.train.seed, workers=True)
-    d, m, t = cfg.data, cfg.model, cfg.trainer
+    d, m = cfg.data, cfg.model
     data = OffroadDataModule.from_config(d, target, cfg.train.seed)
     data.setup()  # every listed file exists, before any training
-    task = SegmentationTask.from_config(m, num_classes, t.channels_last)
+    task = SegmentationTask.from_config(m, num_classes, cfg.train.channels_last)
     loaded = initialise(task.model, pretraining, cfg.pretraining, m.name, m.width)
     if loaded:
         log.info("initialised %d parameter tensors from %s pretraining", len(loaded), pretraining)
@@ -249,14 +265,16 @@ def fit_segmentation(
         "model": OmegaConf.to_container(cfg.model, resolve=True),
         "pretraining": OmegaConf.to_container(cfg.pretraining, resolve=True) if stage == "train" else None,
         "trainer": {k: v for k, v in OmegaConf.to_container(cfg.trainer, resolve=True).items() if k not in LENGTH_SETTINGS},
+        "callbacks": OmegaConf.to_container(cfg.callbacks, resolve=True), "channels_last": cfg.train.channels_last,
     }  # fmt: skip
     files = [data.split_dir / f"{name}.csv" for name in ("train", "val", "test")]
     files += sorted({Path(s.label) for name in ("train", "val") for s in data.samples[name]})
     if stage == "train" and cfg.pretraining.name != "none":
         files.append(Path(cfg.pretraining.checkpoint or cfg.pretraining.weights_path or ""))
-    spec = RunSpec(stage, out_dir, inputs, cfg.train.seed, cfg.train.resume, t.max_epochs, t.patience, identity, files,
-                   [LogSamples(cfg.train.sample_images)])  # fmt: skip
-    return fit(task, data, spec, t, mlflow_logger(cfg, stage), write_more)
+    spec = RunSpec(stage, out_dir, inputs, cfg.train.seed, cfg.train.resume, cfg.trainer, cfg.callbacks, cfg.trainer.max_epochs, identity,
+                   files, [LogSamples(cfg.train.sample_images)])  # fmt: skip
+    logger = training_logger(cfg, stage, m.name, OmegaConf.to_container(cfg, resolve=True))
+    return fit(task, data, spec, logger, write_more)
 
 
 def write_confidence_maps(task: SegmentationTask, data: OffroadDataModule, tmp: Path, final: Path) -> int:

@@ -47,6 +47,17 @@ def _stop(signum: int, frame: Any) -> None:
     os._exit(128 + signum)
 
 
+def objective(result: Any, metric: str | None) -> float | None:
+    """What a Hydra sweeper optimises: `metric` of the stage's returned metrics (None when no
+    search asks for one)."""
+    if metric is None:
+        return None
+    if not isinstance(result, dict) or result.get(metric) is None:
+        found = ", ".join(k for k, v in result.items() if isinstance(v, float)) if isinstance(result, dict) else "none"
+        raise ValueError(f"optimized_metric={metric}: this stage returned no such metric (it has: {found})")
+    return float(result[metric])
+
+
 def run_stage(stage: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
     """What a stage's command does with its composed config: check every value against the schemas'
     rules, run, and turn bad input into one line and exit status 2."""
@@ -65,10 +76,12 @@ def hydra_stage(stage: Callable[[DictConfig], Any]) -> Callable[[], None]:
     register_configs()
 
     @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
-    def main(cfg: DictConfig) -> None:
+    def main(cfg: DictConfig) -> float | None:
         # A stop (kill, `dvc` interrupted) deletes the temporary folders of unfinished outputs
         # instead of leaving them beside the outputs.
         signal.signal(signal.SIGTERM, _stop)
-        run_stage(stage, cfg)
+        result = run_stage(stage, cfg)
+        with clear_errors():
+            return objective(result, cfg.get("optimized_metric"))
 
     return main

@@ -13,22 +13,7 @@ import numpy as np
 
 from offroad_path.sequence.reader import Sequence, find_sequences, open_sequence
 from offroad_path.utils.cli import clear_errors
-
-# RGB per class id: sky, water, dirt, paved road, grass, foliage, tree, man-made obstacle.
-CLASS_COLOURS = np.array(
-    [[135, 190, 235], [30, 80, 200], [150, 100, 50], [110, 110, 110], [90, 190, 60], [30, 120, 30], [10, 70, 10], [230, 40, 40]], np.uint8
-)
-
-
-def colour_semantic(semantic: np.ndarray) -> np.ndarray:
-    return CLASS_COLOURS[np.minimum(semantic, len(CLASS_COLOURS) - 1)]
-
-
-def colour_depth(depth_m: np.ndarray, near_m: float = 2.0, far_m: float = 60.0) -> np.ndarray:
-    """Inverse depth in a perceptual colour map; black where there is no depth."""
-    inv = (1 / np.clip(depth_m, near_m, far_m) - 1 / far_m) / (1 / near_m - 1 / far_m)
-    rgb = cv2.applyColorMap(np.uint8(255 * inv), cv2.COLORMAP_TURBO)[:, :, ::-1]
-    return np.where(depth_m[..., None] > 0, rgb, 0).astype(np.uint8)
+from offroad_path.viz import colour_depth, colour_semantic
 
 
 def frame_row(seq: Sequence, i: int) -> np.ndarray:

@@ -14,6 +14,7 @@ from omegaconf import OmegaConf
 
 from offroad_path import __version__
 from offroad_path.config import WorldConfig
+from offroad_path.geometry.path import path_length
 from offroad_path.sequence.calibration import StereoCalibration
 from offroad_path.sequence.poses import poses_to_text
 from offroad_path.utils.parallel import map_processes
@@ -71,7 +72,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path) -> dict:
     (out_dir / "times.txt").write_text("".join(f"{k / cfg.fps:.6f}\n" for k in range(len(world.poses))))
     (out_dir / "steering.txt").write_text("".join(f"{s:.6f}\n" for s in world.steering))
     v = cfg.vehicle
-    distance = float(np.linalg.norm(np.diff(world.poses[:, :3, 3], axis=0), axis=1).sum())
+    distance = path_length(world.poses)
     meta = {
         "generator": "offroad_path.world",
         "generator_version": __version__,

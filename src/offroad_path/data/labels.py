@@ -1,0 +1,44 @@
+"""Reading a label run (the label stage's output): its summary, and per sequence the recording,
+the folder of labels and disparities, and the poses the labels were made from."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from offroad_path.geometry.path import distance_along
+from offroad_path.sequence.poses import read_poses
+from offroad_path.sequence.reader import Sequence, open_sequence
+
+
+@dataclass(frozen=True)
+class LabelledSequence:
+    name: str
+    sequence: Sequence
+    folder: Path  # <labels_dir>/<name>: label/, disparity/, poses_vo.txt, steps.csv
+    poses: np.ndarray  # (N, 4, 4): the poses the labels were made from (VO, else the recording's own)
+
+    def distance(self) -> np.ndarray:
+        """(N,) metres driven at each frame, along `poses`."""
+        return distance_along(self.poses)
+
+    def labels(self) -> list[Path]:
+        """The label PNGs, NNNNNN.png named by their f0, in frame order."""
+        return sorted((self.folder / "label").glob("*.png"))
+
+
+def read_label_run(labels_dir: Path) -> list[LabelledSequence]:
+    """Every sequence of the label run in labels_dir, in the order of its summary.json."""
+    summary_path = labels_dir / "summary.json"
+    if not summary_path.is_file():
+        raise FileNotFoundError(f"{summary_path}: missing (run the label stage first)")
+    out = []
+    for entry in json.loads(summary_path.read_text())["sequences"]:
+        name, seq = entry["name"], open_sequence(entry["root"])
+        poses_path = labels_dir / name / "poses_vo.txt"
+        poses = read_poses(poses_path, len(seq)) if poses_path.is_file() else seq.poses
+        out.append(LabelledSequence(name, seq, labels_dir / name, poses))
+    return out

@@ -1,0 +1,2 @@
+"""Geometry every stage shares: stereo disparity and depth (`stereo`), and the driven path's
+distance and mirroring (`path`)."""
