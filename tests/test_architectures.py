@@ -22,8 +22,8 @@ GRID = yaml.safe_load((ROOT / "conf" / "evaluate" / "default.yaml").read_text())
 
 def test_the_grid_lists_every_registered_network_and_each_has_a_config():
     assert GRID["architectures"] == list(MODELS), "conf/evaluate/default.yaml `architectures` must list the registry's networks"
-    for name in MODELS:
-        assert yaml.safe_load((ROOT / "conf" / "model" / f"{name}.yaml").read_text())["name"] == name
+    configs = {p.stem: yaml.safe_load(p.read_text())["name"] for p in (ROOT / "conf" / "model").glob("*.yaml")}
+    assert configs == {name: name for name in MODELS}, "each registered network has conf/model/<name>.yaml, and no other"
 
 
 class TinyNet(SegmentationNet):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.labelling.footprint import VehicleFootprint, clip_near, footprint_depth, path_mask, project, swept_polygons
+from offroad_path.labelling.footprint import Occlusion, VehicleFootprint, clip_near, footprint_depth, path_mask, project, swept_polygons
 
 K = np.array([[100.0, 0.0, 50.0], [0.0, 100.0, 40.0], [0.0, 0.0, 1.0]])
 SIZE = (100, 80)
@@ -28,7 +28,7 @@ def test_straight_ahead_corners_project_where_computed_by_hand():
     np.testing.assert_allclose(quad, [[-1, 1, 3], [1, 1, 3], [1, 1, 5], [-1, 1, 5]])
     # u = 100 x / z + 50, v = 100 * 1 / z + 40
     np.testing.assert_allclose(project(K, quad), [[50 - 100 / 3, 40 + 100 / 3], [50 + 100 / 3, 40 + 100 / 3], [70, 60], [30, 60]])
-    mask = path_mask(poses, 0, 1, CAR, K, SIZE)
+    mask = path_mask(footprint_depth(swept_polygons(poses, 0, 1, CAR), K, SIZE))
     assert mask[65, 50] == 255 and mask[61, 35] == 255  # inside the trapezoid
     assert mask[65, 10] == 0 and mask[58, 50] == 0 and mask[40, 50] == 0  # beside it, beyond it, at the horizon
 
@@ -46,7 +46,7 @@ def test_swept_area_closes_the_gaps_of_a_turn():
     poses = np.array([pose()] + [pose(x=0.3 * k * k, z=2.0 * k, yaw_deg=15.0 * k) for k in range(1, 4)])
     polygons = swept_polygons(poses, 0, 3, CAR)
     assert len(polygons) == 3 + 2 * 2  # three footprints, two edge sweeps between each pair
-    with_sweeps = path_mask(poses, 0, 3, CAR, K, SIZE)
+    with_sweeps = path_mask(footprint_depth(swept_polygons(poses, 0, 3, CAR), K, SIZE))
     frames_only = np.zeros_like(with_sweeps)
     frames_only[np.isfinite(footprint_depth(polygons[:3], K, SIZE))] = 255
     assert np.all(with_sweeps >= frames_only)
@@ -61,7 +61,7 @@ def test_footprint_partly_behind_the_camera_is_clipped_not_mirrored():
     # A long vehicle at f0's own place reaches 1 m behind the camera and 3 m ahead; the bottom
     # image row sees the ground at z = 100 / 39 = 2.56 m, so rows 73 to 79 show its front.
     long = VehicleFootprint(width_m=2.0, front_m=3.0, rear_m=-1.0, camera_height_m=1.0)
-    mask = path_mask(np.array([pose(), pose(z=0.0)]), 0, 1, long, K, SIZE)
+    mask = path_mask(footprint_depth(swept_polygons(np.array([pose(), pose(z=0.0)]), 0, 1, long), K, SIZE))
     assert mask[79, 50] == 255 and mask[74, 50] == 255 and mask[72, 50] == 0
     assert not mask[:41].any()  # nothing mirrored up above the horizon
     assert clip_near(square - [0, 0, 5]).shape == (0, 3)  # wholly behind: nothing at all
@@ -70,11 +70,11 @@ def test_footprint_partly_behind_the_camera_is_clipped_not_mirrored():
 def test_occlusion_removes_footprint_behind_a_crest():
     poses = np.array([pose()] + [pose(z=float(z)) for z in range(1, 21)])
     measured = np.zeros((80, 100), np.float32)  # unknown depth everywhere keeps the whole label
-    full = path_mask(poses, 0, 20, CAR, K, SIZE, measured)
+    full = path_mask(footprint_depth(swept_polygons(poses, 0, 20, CAR), K, SIZE), Occlusion(measured, 1.0, 0.1))
     # A wall at 6 m across the whole view: footprint beyond 6 * 1.1 + 1 = 7.6 m is hidden.
     measured[:, :] = 6.0
-    occluded = path_mask(poses, 0, 20, CAR, K, SIZE, measured)
+    occluded = path_mask(footprint_depth(swept_polygons(poses, 0, 20, CAR), K, SIZE), Occlusion(measured, 1.0, 0.1))
     v_at = {z: round(100 / z + 40) for z in (5, 10)}
     assert full[v_at[10], 50] == 255 and occluded[v_at[10], 50] == 0
     assert occluded[v_at[5], 50] == 255
-    assert np.array_equal(path_mask(poses, 0, 20, CAR, K, SIZE), full)
+    assert np.array_equal(path_mask(footprint_depth(swept_polygons(poses, 0, 20, CAR), K, SIZE)), full)

@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 import pytest
 
+from offroad_path.config import OdometryConfig
 from offroad_path.label import label
 from offroad_path.labelling.compare import compare
-from offroad_path.odometry.stereo_vo import OdometryConfig
 from offroad_path.odometry.trajectory import drift, run_odometry
 from offroad_path.sequence import SequenceError, open_sequence
 from offroad_path.utils.atomic import MARKER

@@ -17,7 +17,6 @@ from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from offroad_path.odometry.stereo_vo import OdometryConfig
 from offroad_path.utils.rules import at_least, between, each, one_of, positive, rule, setting, validate
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
@@ -26,9 +25,9 @@ PRETRAININGS = ("none", "segmentation", "imagenet")
 
 
 def _model_names() -> list[str]:
-    from offroad_path.models import MODELS  # the registry, read only when checking
-
-    return list(MODELS)
+    """The networks with a config file (conf/model/<name>.yaml); tests check these against the
+    registry, offroad_path.models.MODELS, which config validation need not import."""
+    return [p.stem for p in (CONF_DIR / "model").glob("*.yaml")]
 
 
 @dataclass
@@ -124,6 +123,27 @@ class DisparityConfig:
     uniqueness_ratio: int = MISSING
     speckle_window: int = MISSING
     speckle_range: int = MISSING
+
+
+@dataclass
+class OdometryConfig:
+    """Stereo visual odometry (offroad_path.odometry.stereo_vo)."""
+
+    max_features: int = MISSING
+    bucket_rows: int = MISSING
+    bucket_cols: int = MISSING
+    corner_quality: float = MISSING  # corners weaker than this fraction of the strongest are ignored
+    lk_window: int = MISSING  # small windows: less perspective distortion of slanted ground between views
+    lk_levels: int = MISSING
+    max_row_error_px: float = MISSING  # stereo matches must stay on the same row (rectified)
+    min_disparity_px: float = MISSING
+    max_depth_m: float = MISSING
+    forward_backward_px: float = MISSING
+    ransac_reprojection_px: float = MISSING
+    ransac_iterations: int = MISSING
+    refine_iterations: int = MISSING
+    huber_px: float = MISSING
+    min_inliers: int = MISSING
 
 
 @dataclass

@@ -8,7 +8,7 @@ import lightning as L
 from omegaconf import DictConfig
 from torch.utils.data import DataLoader
 
-from offroad_path.data.dataset import EpochSampler, ManifestDataset, transforms
+from offroad_path.data.dataset import Augmentation, EpochSampler, ManifestDataset, transforms
 from offroad_path.data.manifest import Sample, read_manifest
 
 
@@ -38,7 +38,8 @@ class OffroadDataModule(L.LightningDataModule):
 
     def _loader(self, name: str, train: bool) -> DataLoader:
         hp = self.hparams
-        transform = transforms(hp.width, hp.height, augment=train and hp.augment, jitter=hp.jitter, min_scale=hp.min_scale, seed=hp.seed)
+        augmentation = Augmentation(hp.jitter, hp.min_scale) if train and hp.augment else None
+        transform = transforms(hp.width, hp.height, augmentation, seed=hp.seed)
         dataset = ManifestDataset(self.samples[name], hp.target, transform)
         sampler = EpochSampler(len(dataset), hp.seed) if train else None
         return DataLoader(dataset, batch_size=hp.batch_size, sampler=sampler, drop_last=train and len(dataset) > hp.batch_size,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import albumentations as A
 import cv2
@@ -67,14 +68,21 @@ def load_maps(paths: list[str]) -> np.ndarray:
     return np.stack(maps)
 
 
-def transforms(width: int, height: int, augment: bool, jitter: float = 0.2, min_scale: float = 0.8, seed: int = 0) -> A.Compose:
+@dataclass(frozen=True)
+class Augmentation:
+    jitter: float  # brightness, contrast and saturation jitter
+    min_scale: float  # the random resized crop keeps at least this fraction of the image
+
+
+def transforms(width: int, height: int, augmentation: Augmentation | None = None, seed: int = 0) -> A.Compose:
     """Resize to the network's input (nearest for the target), with photometric jitter and a small
     random scale and crop when augmenting; flips are already in the data as mirrored copies."""
     ops: list = []
-    if augment:
+    if augmentation is not None:
         aspect = width / height
+        jitter = augmentation.jitter
         ops += [
-            A.RandomResizedCrop(size=(height, width), scale=(min_scale, 1.0), ratio=(aspect * 0.9, aspect * 1.1)),
+            A.RandomResizedCrop(size=(height, width), scale=(augmentation.min_scale, 1.0), ratio=(aspect * 0.9, aspect * 1.1)),
             A.ColorJitter(brightness=jitter, contrast=jitter, saturation=jitter, hue=0.02),
         ]
     else:

@@ -21,7 +21,7 @@ class PathModel:
     def __call__(self, images: list[np.ndarray]) -> list[np.ndarray]:
         """RGB (H, W, 3) uint8 images -> path confidence (H, W) float32 in [0, 1], one per image."""
         if getattr(self, "_prepare", None) is None:  # built once: predict calls this every frame
-            self._prepare = transforms(self.width, self.height, augment=False)
+            self._prepare = transforms(self.width, self.height)
         batch = torch.stack([self._prepare(image=image)["image"] for image in images])  # (N, 3, h, w)
         confidence = self.run(batch)  # (N, h, w)
         return [cv2.resize(c, (im.shape[1], im.shape[0]), interpolation=cv2.INTER_LINEAR) for c, im in zip(confidence, images, strict=True)]

@@ -107,27 +107,22 @@ def footprint_depth(polygons: list[np.ndarray], K: np.ndarray, size: tuple[int, 
     return depth
 
 
-def path_mask(
-    poses: np.ndarray,
-    f0: int,
-    fn: int,
-    footprint: VehicleFootprint,
-    K: np.ndarray,
-    size: tuple[int, int],
-    measured_depth: np.ndarray | None = None,
-    margin_m: float = 1.0,
-    margin_rel: float = 0.1,
-) -> np.ndarray:
-    """Binary path label (H, W) uint8 0/255 for frame f0.
+@dataclass(frozen=True)
+class Occlusion:
+    """What the camera saw at f0: footprint farther than the measured surface by more than
+    margin_m + margin_rel * depth is hidden (behind a crest or an obstacle)."""
 
-    With `measured_depth` (z at f0, 0 where unknown), footprint pixels farther than the measured
-    surface by more than margin_m + margin_rel * depth are hidden (behind a crest or an obstacle)
-    and not labelled path.
-    """
-    depth = footprint_depth(swept_polygons(poses, f0, fn, footprint), K, size)
-    path = np.isfinite(depth)
-    if measured_depth is not None:
-        known = measured_depth > 0
-        hidden = known & (depth > measured_depth * (1 + margin_rel) + margin_m)
+    measured_depth: np.ndarray  # (H, W) z at f0, 0 where unknown
+    margin_m: float
+    margin_rel: float
+
+
+def path_mask(footprint_z: np.ndarray, occlusion: Occlusion | None = None) -> np.ndarray:
+    """Binary path label (H, W) uint8 0/255 from the swept footprint's depth at f0 (footprint_depth
+    of swept_polygons, inf off the path); hidden footprint is not path when `occlusion` is given."""
+    path = np.isfinite(footprint_z)
+    if occlusion is not None:
+        measured = occlusion.measured_depth
+        hidden = (measured > 0) & (footprint_z > measured * (1 + occlusion.margin_rel) + occlusion.margin_m)
         path &= ~hidden
     return np.where(path, 255, 0).astype(np.uint8)

@@ -11,11 +11,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from offroad_path.config import OdometryConfig
 from offroad_path.geometry.path import distance_along
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, encode_disparity, sgbm
-from offroad_path.labelling.footprint import VehicleFootprint, path_mask
+from offroad_path.labelling.footprint import Occlusion, VehicleFootprint, footprint_depth, path_mask, swept_polygons
 from offroad_path.labelling.frame_selection import select_segments
-from offroad_path.odometry.stereo_vo import OdometryConfig
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
 from offroad_path.sequence.errors import SequenceError
 from offroad_path.sequence.poses import poses_to_text, read_poses
@@ -112,20 +112,13 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         report = SegmentReport(
             f0, fn, float(travelled[fn] - travelled[f0]), float(np.linalg.norm(positions[fn] - positions[f0])), None, None, True, "", 0
         )
-        if run is not None:
-            steps = run.steps[f0:fn]
-            report.min_inliers = min(s.inliers for s in steps)
-            report.mean_inliers = float(np.mean([s.inliers for s in steps]))
-            failed = [k for k in range(f0, fn) if not run.steps[k].ok]
-            if failed:
-                k = failed[0]
-                report.kept = False
-                report.reason = f"odometry failed from frame {k} to {k + 1}: {run.steps[k].reason}"
-                reports.append(report)
-                continue
+        if run is not None and not odometry_holds(run, report):
+            reports.append(report)
+            continue
         disparity = compute_disparity(matcher, seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
-        measured = measured_depth(seq, f0, disparity, cfg.occlusion) if cfg.occlusion.enabled else None
-        mask = path_mask(poses, f0, fn, footprint, K, size, measured, cfg.occlusion.margin_m, cfg.occlusion.margin_rel)
+        o = cfg.occlusion
+        occlusion = Occlusion(measured_depth(seq, f0, disparity, o), o.margin_m, o.margin_rel) if o.enabled else None
+        mask = path_mask(footprint_depth(swept_polygons(poses, f0, fn, footprint), K, size), occlusion)
         report.label_pixels = int(np.count_nonzero(mask))
         if report.label_pixels == 0:
             report.kept, report.reason = False, "the footprint falls outside the image"
@@ -148,15 +141,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         "warnings": [],
     }
     if run is not None:
-        (out_dir / "poses_vo.txt").write_text(poses_to_text(poses))
-        rows = [{"from": k, "to": k + 1, "ok": s.ok, "features": s.features, "tracked": s.tracked, "inliers": s.inliers, "reason": s.reason}
-                for k, s in enumerate(run.steps)]  # fmt: skip
-        _write_csv(out_dir / "steps.csv", rows, ["from", "to", "ok", "features", "tracked", "inliers", "reason"])
-        summary["vo_failed_steps"] = int(run.failed.sum())
-        if seq.poses is not None:
-            summary["drift"], problem = drift(poses, seq.poses, cfg.distance_m)
-            if problem:
-                summary["warnings"].append(f"no drift figure: {problem}")
+        summary |= write_odometry(out_dir, run, seq, cfg.distance_m)
     if not reports:
         summary["warnings"].append(
             f"no label: the {'estimated ' if run is not None else ''}path ({travelled[-1]:.1f} m over {len(seq)} frames) never gets "
@@ -169,6 +154,34 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     for warning in summary["warnings"]:
         log.warning("%s: %s", seq.name, warning)
     return summary
+
+
+def odometry_holds(run: OdometryRun, report: SegmentReport) -> bool:
+    """Fill the segment's inlier figures; False (the segment dropped, with the reason) when a VO
+    step inside it failed."""
+    steps = run.steps[report.f0 : report.fn]
+    report.min_inliers = min(s.inliers for s in steps)
+    report.mean_inliers = float(np.mean([s.inliers for s in steps]))
+    failed = [k for k in range(report.f0, report.fn) if not run.steps[k].ok]
+    if failed:
+        k = failed[0]
+        report.kept, report.reason = False, f"odometry failed from frame {k} to {k + 1}: {run.steps[k].reason}"
+    return not failed
+
+
+def write_odometry(out_dir: Path, run: OdometryRun, seq: Sequence, segment_m: float) -> dict:
+    """poses_vo.txt and steps.csv; the summary's VO figures (failed steps, drift against the
+    sequence's own poses when it has them, else a warning saying why not)."""
+    (out_dir / "poses_vo.txt").write_text(poses_to_text(run.poses))
+    rows = [{"from": k, "to": k + 1, "ok": s.ok, "features": s.features, "tracked": s.tracked, "inliers": s.inliers, "reason": s.reason}
+            for k, s in enumerate(run.steps)]  # fmt: skip
+    _write_csv(out_dir / "steps.csv", rows, ["from", "to", "ok", "features", "tracked", "inliers", "reason"])
+    found: dict = {"vo_failed_steps": int(run.failed.sum()), "drift": None, "warnings": []}
+    if seq.poses is not None:
+        found["drift"], problem = drift(run.poses, seq.poses, segment_m)
+        if problem:
+            found["warnings"].append(f"no drift figure: {problem}")
+    return found
 
 
 def _write_csv(path: Path, rows: list[dict], fieldnames: list[str]) -> None:

@@ -14,28 +14,9 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from omegaconf import MISSING
 
+from offroad_path.config import OdometryConfig
 from offroad_path.sequence.calibration import StereoCalibration
-
-
-@dataclass
-class OdometryConfig:
-    max_features: int = MISSING
-    bucket_rows: int = MISSING
-    bucket_cols: int = MISSING
-    corner_quality: float = MISSING  # corners weaker than this fraction of the strongest are ignored
-    lk_window: int = MISSING  # small windows: less perspective distortion of slanted ground between views
-    lk_levels: int = MISSING
-    max_row_error_px: float = MISSING  # stereo matches must stay on the same row (rectified)
-    min_disparity_px: float = MISSING
-    max_depth_m: float = MISSING
-    forward_backward_px: float = MISSING
-    ransac_reprojection_px: float = MISSING
-    ransac_iterations: int = MISSING
-    refine_iterations: int = MISSING
-    huber_px: float = MISSING
-    min_inliers: int = MISSING
 
 
 @dataclass

@@ -7,8 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.config import OdometryConfig
 from offroad_path.geometry.path import path_length
-from offroad_path.odometry.stereo_vo import OdometryConfig, StepResult, StereoOdometry
+from offroad_path.odometry.stereo_vo import StepResult, StereoOdometry
 from offroad_path.sequence.reader import Sequence
 
 log = logging.getLogger(__name__)

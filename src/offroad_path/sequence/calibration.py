@@ -41,6 +41,20 @@ class StereoCalibration:
 
 def read_calibration(path: Path, keys: tuple[str, str] | None) -> StereoCalibration:
     """Parse and check a rectified stereo calib.txt; `keys` picks keyed rows (e.g. P2, P3)."""
+    P_left, P_right = (_matrix(path, row, name) for row, name in zip(_projection_rows(path, keys), ("left", "right"), strict=True))
+    calib = StereoCalibration(P_left, P_right)
+    if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
+        raise SequenceError(path, "left and right matrices have different intrinsics: the pair is not rectified")
+    if P_left[0, 0] <= 0 or P_left[1, 1] <= 0:
+        raise SequenceError(path, "focal lengths must be positive")
+    if not calib.baseline_m > 0:
+        raise SequenceError(path, f"the right matrix has no baseline (B = {calib.baseline_m:g} m): P_right[0,3] must be -fx*B with B > 0")
+    return calib
+
+
+def _projection_rows(path: Path, keys: tuple[str, str] | None) -> list[str]:
+    """The left and right rows of calib.txt: keyed ones (`keys`, else P0/P1 or P2/P3 when the file
+    has keys), or the file's two unkeyed rows."""
     try:
         lines = [line.strip() for line in path.read_text().splitlines() if line.strip()]
     except (OSError, UnicodeDecodeError) as e:
@@ -53,29 +67,18 @@ def read_calibration(path: Path, keys: tuple[str, str] | None) -> StereoCalibrat
             keyed[head.strip()] = rest
         else:
             unkeyed.append(line)
-    if keys is None:
-        if keyed:
-            keys = next((k for k in (("P0", "P1"), ("P2", "P3")) if k[0] in keyed and k[1] in keyed), None)
-            if keys is None:
-                raise SequenceError(path, f"has keyed rows {sorted(keyed)} but neither P0/P1 nor P2/P3")
-        elif len(unkeyed) != 2:
+    if keys is None and not keyed:
+        if len(unkeyed) != 2:
             raise SequenceError(path, f"must hold two rows of 12 numbers (P_left, P_right), found {len(unkeyed)} rows")
-    if keys is not None:
-        missing = [k for k in keys if k not in keyed]
-        if missing:
-            raise SequenceError(path, f"lacks the row(s) {', '.join(missing)}")
-        rows = [keyed[k] for k in keys]
-    else:
-        rows = unkeyed
-    P_left, P_right = (_matrix(path, row, name) for row, name in zip(rows, ("left", "right"), strict=True))
-    calib = StereoCalibration(P_left, P_right)
-    if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
-        raise SequenceError(path, "left and right matrices have different intrinsics: the pair is not rectified")
-    if P_left[0, 0] <= 0 or P_left[1, 1] <= 0:
-        raise SequenceError(path, "focal lengths must be positive")
-    if not calib.baseline_m > 0:
-        raise SequenceError(path, f"the right matrix has no baseline (B = {calib.baseline_m:g} m): P_right[0,3] must be -fx*B with B > 0")
-    return calib
+        return unkeyed
+    if keys is None:
+        keys = next((k for k in (("P0", "P1"), ("P2", "P3")) if k[0] in keyed and k[1] in keyed), None)
+        if keys is None:
+            raise SequenceError(path, f"has keyed rows {sorted(keyed)} but neither P0/P1 nor P2/P3")
+    missing = [k for k in keys if k not in keyed]
+    if missing:
+        raise SequenceError(path, f"lacks the row(s) {', '.join(missing)}")
+    return [keyed[k] for k in keys]
 
 
 def _matrix(path: Path, row: str, name: str) -> np.ndarray:

@@ -48,10 +48,8 @@ def from_segmentation(model: SegmentationNet, checkpoint: Path, arch: str, width
     return [k for k in state if k not in head]
 
 
-def from_imagenet_vgg(model: SegmentationNet, path: Path | None) -> list[str]:
-    """Copy VGG16 (FCN) or VGG16-BN (SegNet) ImageNet weights into the encoder, by layer order."""
-    if not isinstance(model, SegNet | FCN8s):
-        raise ValueError("imagenet pretraining exists for the VGG16 encoders of segnet and fcn, not this model")
+def _vgg_state(path: Path | None) -> dict:
+    """The state dict of a torchvision VGG16(-BN) file, read weights-only."""
     if path is None or not path.is_file():
         raise FileNotFoundError(f"{path}: no VGG16 ImageNet weights there (pretraining.weights_path); nothing is downloaded")
     try:
@@ -60,6 +58,14 @@ def from_imagenet_vgg(model: SegmentationNet, path: Path | None) -> list[str]:
         raise ValueError(f"{path}: not a PyTorch state dict ({e})") from e
     if not isinstance(state, dict) or not any(k.startswith("features.") for k in state):
         raise ValueError(f"{path}: not in torchvision's VGG layout (no features.N.weight keys)")
+    return state
+
+
+def from_imagenet_vgg(model: SegmentationNet, path: Path | None) -> list[str]:
+    """Copy VGG16 (FCN) or VGG16-BN (SegNet) ImageNet weights into the encoder, by layer order."""
+    if not isinstance(model, SegNet | FCN8s):
+        raise ValueError("imagenet pretraining exists for the VGG16 encoders of segnet and fcn, not this model")
+    state = _vgg_state(path)
     index = lambda key: int(key.split(".")[1])  # noqa: E731
     convs = sorted({index(k) for k, v in state.items() if k.startswith("features.") and k.endswith(".weight") and v.ndim == 4})
     norms = sorted({index(k) for k in state if k.startswith("features.") and k.endswith(".running_mean")})

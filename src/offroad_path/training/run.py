@@ -282,7 +282,7 @@ def write_confidence_maps(task: SegmentationTask, data: OffroadDataModule, tmp: 
     float16 .npy under tmp/<sequence>/NNNNNN[_mirrored].npy, listed in tmp/manifest.csv by the path
     each will have once tmp is renamed to `final`."""
     samples = data.samples["test"]
-    transform = transforms(data.hparams.width, data.hparams.height, augment=False)
+    transform = transforms(data.hparams.width, data.hparams.height)
     task.eval()
     rows = []
     tmp.mkdir()

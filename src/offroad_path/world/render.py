@@ -84,6 +84,19 @@ def march_terrain(terrain: Terrain, origin: np.ndarray, dirs: np.ndarray, max_t:
     # Per-ray constants, compacted together with the ray state as rays finish.
     per_ray = [dirs[idx, 0], dirs[idx, 1], dirs[idx, 2], 1.0 / rate[idx], t_limit[idx], inv_sink[idx]]
     per_ray += [radius / horizontal[idx] for radius, _ in terrain.max_levels]
+    brackets = _march(terrain, (ox, oy, oz), idx, per_ray)
+    if not brackets:
+        return t_hit
+    idx, lo, hi, c_lo, c_hi = (np.concatenate(parts) for parts in zip(*brackets, strict=True))
+    t_hit[idx] = _refine(clearance, dirs[idx], lo, hi, (c_lo, c_hi))
+    return t_hit
+
+
+def _march(terrain: Terrain, origin: tuple, idx: np.ndarray, per_ray: list[np.ndarray]) -> list[tuple]:
+    """Step each ray (indices idx) along, as far as the terrain's clearance and the height bounds
+    allow, until its clearance turns negative or it passes its limit: the brackets (rays, t and
+    clearance before and after the crossing) in which each crossing ray meets the ground."""
+    ox, oy, oz = origin
     t = np.full(len(idx), NEAR_M, np.float32)
     t_prev, c_prev = t.copy(), np.full(len(idx), np.inf, np.float32)
     alive = np.ones(len(idx), bool)
@@ -112,13 +125,16 @@ def march_terrain(terrain: Terrain, origin: np.ndarray, dirs: np.ndarray, max_t:
             keep = np.flatnonzero(alive)
             idx, t, t_prev, c_prev, alive = idx[keep], t[keep], t_prev[keep], c_prev[keep], alive[keep]
             per_ray = [a[keep] for a in per_ray]
-    if not brackets:
-        return t_hit
-    idx, lo, hi, c_lo, c_hi = (np.concatenate(parts) for parts in zip(*brackets, strict=True))
+    return brackets
+
+
+def _refine(clearance, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray, c: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The crossing t inside each bracket [lo, hi] (clearance c_lo > 0 >= c_hi) of rays `dirs`."""
+    c_lo, c_hi = c
     # A ray already below ground at NEAR_M has no bracket: report the near plane.
     below = ~np.isfinite(c_lo)
     lo[below], c_lo[below] = hi[below], 0.0
-    dx, dy, dz = dirs[idx, 0], dirs[idx, 1], dirs[idx, 2]
+    dx, dy, dz = dirs[:, 0], dirs[:, 1], dirs[:, 2]
     for i in range(REFINEMENTS):
         # Bisection first (robust on any bracket), then false position (fast once it is tight).
         if i < BISECTIONS:
@@ -134,8 +150,7 @@ def march_terrain(terrain: Terrain, origin: np.ndarray, dirs: np.ndarray, max_t:
         c_hi = np.where(above, c_hi, c)
     denom = c_lo - c_hi
     frac = np.where(denom > 0, c_lo / np.where(denom > 0, denom, 1.0), 0.0)
-    t_hit[idx] = lo + frac * (hi - lo)
-    return t_hit
+    return lo + frac * (hi - lo)
 
 
 def _tangent_range(a: np.ndarray, z: np.ndarray, r: np.ndarray, f: float, c: float) -> tuple[np.ndarray, np.ndarray]:
@@ -158,13 +173,23 @@ def _tangent_range(a: np.ndarray, z: np.ndarray, r: np.ndarray, f: float, c: flo
     return lo, hi
 
 
-def trace_objects(world: World, camera: PinholeCamera, pose: np.ndarray, dirs: np.ndarray, t_bound: np.ndarray, max_t: float):
+@dataclass(frozen=True)
+class Shot:
+    """One camera at one pose, with its pixels' ray directions in the world (t = depth)."""
+
+    camera: PinholeCamera
+    pose: np.ndarray  # (4, 4) camera to world
+    dirs: np.ndarray  # (H * W, 3)
+
+
+def trace_objects(world: World, shot: Shot, t_bound: np.ndarray, max_t: float):
     """Object hits nearer than t_bound per pixel: (t, normal, object index); index -1 where none.
 
     Each object is tested only on the pixels of its projected bounding sphere, and only where
     nothing already found is nearer than the whole object; all (pixel, object) pairs of one kind
     go through its intersection function at once.
     """
+    camera, pose, dirs = shot.camera, shot.pose, shot.dirs
     h, w = camera.height, camera.width
     t_best = t_bound.copy()
     normal = np.zeros((h * w, 3))
@@ -209,7 +234,7 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     dirs = rays @ pose[:3, :3].T  # (M, 3) world directions, t = depth
     origin = pose[:3, 3]
     t_ground = march_terrain(world.terrain, origin, dirs, max_t)
-    t, n_obj, obj_index = trace_objects(world, camera, pose, dirs, t_ground, max_t)
+    t, n_obj, obj_index = trace_objects(world, Shot(camera, pose, dirs), t_ground, max_t)
     use_obj = obj_index >= 0
     hit = np.isfinite(t) & (t < max_t)
     t = np.where(hit, t, 0.0)

@@ -6,16 +6,16 @@ Everything is drawn from one seed, so a world is a pure function of (config, see
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from offroad_path.config import WorldConfig
-from offroad_path.world.classes import DIRT, FOLIAGE, GRASS, OBSTACLE, PAVED, TREE, WATER
+from offroad_path.world.classes import BASE_COLORS, DIRT, GRASS, PAVED, WATER
 from offroad_path.world.objects import Objects
-from offroad_path.world.terrain import Grid, Terrain, fourier_hills, value_noise
+from offroad_path.world.placement import Placement, place_objects
+from offroad_path.world.terrain import Grid, Terrain, fourier_hills, polyline_mask, value_noise
 from offroad_path.world.trajectory import (
     ARC_STEP_M,
     Curve,
@@ -29,17 +29,6 @@ from offroad_path.world.trajectory import (
 
 HEIGHT_STEP_M = 0.25
 MATERIAL_STEP_M = 0.05
-
-BASE_COLORS = {  # linear RGB albedo before per-world jitter
-    WATER: (0.10, 0.13, 0.12),
-    DIRT: (0.50, 0.38, 0.26),
-    PAVED: (0.36, 0.36, 0.37),
-    GRASS: (0.26, 0.42, 0.14),
-    FOLIAGE: (0.14, 0.30, 0.09),
-    TREE: (0.09, 0.22, 0.07),
-    OBSTACLE: (0.55, 0.50, 0.45),
-}
-TRUNK_COLOR = (0.28, 0.20, 0.13)
 
 
 @dataclass
@@ -99,7 +88,7 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
     heights += cfg.bump_height_m * value_noise(rng, hgrid.shape, 1.5 / HEIGHT_STEP_M)
     heights += 0.3 * cfg.bump_height_m * value_noise(rng, hgrid.shape, 0.6 / HEIGHT_STEP_M)
     # A track bed is smoother than the land around it.
-    bed = _polyline_mask(hgrid, track.xz, cfg.track_width_m + 2.0)
+    bed = polyline_mask(hgrid, track.xz, cfg.track_width_m + 2.0)
     bed = cv2.GaussianBlur(bed.astype(np.float32) / 255.0, (0, 0), 1.0 / HEIGHT_STEP_M)
     smooth = cv2.GaussianBlur(heights.astype(np.float32), (0, 0), 2.0 / HEIGHT_STEP_M).astype(np.float64)
     heights = heights + 0.8 * bed * (smooth - heights)
@@ -107,8 +96,8 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
     materials = np.full(mgrid.shape, GRASS, np.uint8)
     forks = _forks(rng, track, cfg.forks_per_100m * density[0])
     for fork in forks:
-        _paint_ragged(rng, materials, mgrid, fork.xz, cfg.track_width_m * 0.8, DIRT)
-    _paint_ragged(rng, materials, mgrid, track.xz, cfg.track_width_m, DIRT)
+        _paint_ragged(rng, materials, mgrid, (fork.xz, cfg.track_width_m * 0.8), DIRT)
+    _paint_ragged(rng, materials, mgrid, (track.xz, cfg.track_width_m), DIRT)
     _paint_paved(rng, materials, mgrid, track, cfg)
     puddles = _puddles(rng, track, cfg.puddles_per_100m * density[1], cfg.track_width_m)
     for centre, axes, angle in puddles:
@@ -123,7 +112,7 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
     steering = normalised_steering(drive.at(frame_s)[2], vehicle)
 
     sky = _sky(rng, cfg)
-    objects = _objects(rng, cfg, terrain, drive, track, density)
+    objects = place_objects(Placement(rng, cfg, terrain, drive), track, density)
     shadow = _shadow_map(mgrid, terrain, objects, sky.sun)
     palette = _palette(rng)
     textures = _textures(rng)
@@ -168,16 +157,9 @@ def _forks(rng: np.random.Generator, track: Curve, per_100m: float) -> list[Curv
     return forks
 
 
-def _polyline_mask(grid: Grid, xz: np.ndarray, width_m: float) -> np.ndarray:
-    mask = np.zeros(grid.shape, np.uint8)
-    pts = np.rint(grid.to_pixel(xz[::4]) * 16).astype(np.int32)  # 4 fractional bits
-    cv2.polylines(mask, [pts], False, 255, max(1, round(width_m / grid.step)), cv2.LINE_8, shift=4)
-    return mask
-
-
-def _paint_ragged(rng: np.random.Generator, materials: np.ndarray, grid: Grid, xz: np.ndarray, width_m: float, cls: int) -> None:
-    """Paint a band of `cls` along a polyline, with edges frayed by noise like a worn track."""
-    mask = _polyline_mask(grid, xz, width_m)
+def _paint_ragged(rng: np.random.Generator, materials: np.ndarray, grid: Grid, band: tuple[np.ndarray, float], cls: int) -> None:
+    """Paint `cls` on a band (polyline xz, width m), with edges frayed by noise like a worn track."""
+    mask = polyline_mask(grid, *band)
     ys, xs = np.nonzero(cv2.dilate(mask, np.ones((15, 15), np.uint8)))
     if len(ys) == 0:
         return
@@ -196,7 +178,7 @@ def _paint_paved(rng: np.random.Generator, materials: np.ndarray, grid: Grid, tr
         span = rng.uniform(8.0, 25.0)
         i0, i1 = int(start / ARC_STEP_M), int(min(start + span, length) / ARC_STEP_M)
         if i1 - i0 > 2:
-            mask = _polyline_mask(grid, track.xz[i0:i1], cfg.track_width_m + 0.4)
+            mask = polyline_mask(grid, track.xz[i0:i1], cfg.track_width_m + 0.4)
             materials[mask > 0] = PAVED
         paved += span
     if rng.uniform() < 0.5:
@@ -287,81 +269,6 @@ def _textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
         "coarse": octaves((128, 32, 8)),
         "cloud": octaves((128, 64, 16, 4)),
     }
-
-
-def _objects(rng: np.random.Generator, cfg: WorldConfig, terrain: Terrain, drive: Curve, track: Curve, density: np.ndarray) -> Objects:
-    grid = terrain.grid
-    keep_clear = _polyline_mask(grid, drive.xz, cfg.vehicle.width_m + 2.5) > 0
-    on_track = _polyline_mask(grid, track.xz, cfg.track_width_m + 1.0) > 0
-    objects = Objects()
-    area_ha = grid.shape[0] * grid.shape[1] * grid.step**2 / 1e4
-
-    def free_points(n: int, blocked: np.ndarray) -> np.ndarray:
-        xz = rng.uniform([grid.x0, grid.z0], [grid.x0 + grid.shape[1] * grid.step, grid.z0 + grid.shape[0] * grid.step], (n, 2))
-        row, col = grid.nearest(xz[:, 0], xz[:, 1])
-        return xz[~blocked[row, col]]
-
-    def ground_y(xz: np.ndarray) -> float:
-        return -float(terrain.elevation(np.array([xz[0]]), np.array([xz[1]]))[0])
-
-    blocked = keep_clear | on_track
-    for xz in free_points(rng.poisson(cfg.trees_per_hectare * density[2] * area_ha), blocked):
-        y = ground_y(xz)
-        trunk_r, trunk_h = rng.uniform(0.12, 0.3), rng.uniform(1.8, 4.0)
-        crown_r = rng.uniform(1.2, 2.8)
-        objects.add_cylinder(xz[0], xz[1], y - trunk_h - 0.5 * crown_r, y + 0.3, trunk_r, TREE, np.asarray(TRUNK_COLOR))
-        crown_colour = np.asarray(BASE_COLORS[TREE]) * rng.uniform(0.7, 1.3)
-        objects.add_sphere(np.array([xz[0], y - trunk_h - 0.6 * crown_r, xz[1]]), crown_r, TREE, crown_colour)
-    for xz in free_points(rng.poisson(cfg.bushes_per_hectare * density[3] * area_ha), blocked):
-        r = rng.uniform(0.35, 1.1)
-        colour = np.asarray(BASE_COLORS[FOLIAGE]) * rng.uniform(0.7, 1.4)
-        objects.add_sphere(np.array([xz[0], ground_y(xz) - 0.35 * r, xz[1]]), r, FOLIAGE, colour)
-    _man_made(rng, cfg, objects, drive, keep_clear, grid, ground_y)
-    return objects
-
-
-def _man_made(rng, cfg: WorldConfig, objects: Objects, drive: Curve, keep_clear: np.ndarray, grid: Grid, ground_y) -> None:
-    """Posts, boxes and fences near the drive: obstacles the path has to avoid."""
-    normal = drive.normal()
-    n = rng.poisson(cfg.obstacles_per_100m * drive.length / 100.0)
-    for _ in range(n):
-        i = int(rng.uniform(0.0, 1.0) * (len(drive.xz) - 1))
-        side = rng.choice([-1, 1])
-        xz = drive.xz[i] + normal[i] * side * rng.uniform(cfg.vehicle.width_m / 2 + 1.5, 10.0)
-        row, col = grid.nearest(xz[:1], xz[1:])
-        if keep_clear[row[0], col[0]]:
-            continue
-        y = ground_y(xz)
-        grey = rng.uniform(0.3, 0.8)
-        colour = np.asarray(BASE_COLORS[OBSTACLE]) * grey / 0.5 * rng.uniform(0.85, 1.15, 3)
-        kind = rng.choice(["post", "box", "fence"], p=[0.35, 0.35, 0.3])
-        if kind == "post":
-            objects.add_cylinder(xz[0], xz[1], y - rng.uniform(0.8, 1.5), y + 0.2, rng.uniform(0.06, 0.15), OBSTACLE, colour)
-        elif kind == "box":
-            half = rng.uniform([0.25, 0.2, 0.25], [0.7, 0.6, 0.9])
-            objects.add_box(np.array([xz[0], y - half[1] + 0.05, xz[1]]), half, rng.uniform(0, np.pi), OBSTACLE, colour)
-        else:
-            _fence(rng, objects, drive, i, side, cfg, keep_clear, grid, ground_y, colour)
-
-
-def _fence(rng, objects, drive: Curve, i: int, side: int, cfg: WorldConfig, keep_clear, grid: Grid, ground_y, colour) -> None:
-    offset = side * rng.uniform(cfg.vehicle.width_m / 2 + 2.0, 7.0)
-    span_steps = int(rng.uniform(8.0, 20.0) / ARC_STEP_M)
-    post_every = int(2.5 / ARC_STEP_M)
-    posts = []
-    for j in range(i, min(i + span_steps, len(drive.xz) - 1), post_every):
-        xz = drive.xz[j] + drive.normal()[j] * offset
-        row, col = grid.nearest(xz[:1], xz[1:])
-        if keep_clear[row[0], col[0]]:
-            break
-        posts.append((xz, ground_y(xz)))
-        objects.add_box(np.array([xz[0], posts[-1][1] - 0.55, xz[1]]), np.array([0.06, 0.6, 0.06]), drive.heading[j], OBSTACLE, colour)
-    for (a, ya), (b, yb) in itertools.pairwise(posts):
-        mid, length = (a + b) / 2, np.linalg.norm(b - a)
-        yaw = np.arctan2(-(b[1] - a[1]), b[0] - a[0])  # rail's local x, (cos, 0, -sin), along a -> b
-        for height in (0.45, 0.95):
-            y = (ya + yb) / 2 - height
-            objects.add_box(np.array([mid[0], y, mid[1]]), np.array([length / 2, 0.05, 0.025]), yaw, OBSTACLE, colour * 0.9)
 
 
 def _shadow_map(grid: Grid, terrain: Terrain, objects: Objects, sun: np.ndarray) -> np.ndarray:

@@ -150,3 +150,11 @@ def sample_bilinear(image: np.ndarray, mx: np.ndarray, my: np.ndarray, wrap: boo
     mode = cv2.BORDER_WRAP if wrap else cv2.BORDER_REPLICATE
     out = cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=mode)
     return out.reshape(rows * cols, -1)[:n].squeeze(-1) if out.ndim == 2 else out.reshape(rows * cols, -1)[:n]
+
+
+def polyline_mask(grid: Grid, xz: np.ndarray, width_m: float) -> np.ndarray:
+    """255 on the cells within width_m of a polyline (xz, metres), 0 elsewhere."""
+    mask = np.zeros(grid.shape, np.uint8)
+    pts = np.rint(grid.to_pixel(xz[::4]) * 16).astype(np.int32)  # 4 fractional bits
+    cv2.polylines(mask, [pts], False, 255, max(1, round(width_m / grid.step)), cv2.LINE_8, shift=4)
+    return mask
