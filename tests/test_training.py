@@ -101,6 +101,14 @@ def test_a_search_for_a_metric_the_stage_does_not_return_says_so(split_dir, tmp_
     assert run.returncode == 2 and "optimized_metric=val_accuracy: this stage returned no such metric" in run.stderr
 
 
+def test_a_callback_that_cannot_be_built_is_named(split_dir, tmp_path, tiny_overrides):
+    overrides = [*tiny_overrides, f"data.split_dir={split_dir}", "trainer.fast_dev_run=true", "mlflow.enabled=false",
+                 f"train.out_dir={tmp_path / 'run'}", "+callbacks.mine._target_=lightning.pytorch.callbacks.NoSuchCallback"]  # fmt: skip
+    run = subprocess.run([sys.executable, "-m", "offroad_path.train", *overrides], capture_output=True, text=True, cwd=tmp_path)
+    assert run.returncode == 2 and "error: callbacks.mine: cannot be built" in run.stderr, run.stderr[-2000:]
+    assert not (tmp_path / "run").exists()
+
+
 def write_vgg(path: Path, batch_norm: bool, width: float = 1.0) -> None:
     """A file in torchvision's VGG16(-BN) state-dict layout, with random tensors."""
     state, index, cin = {}, 0, 3

@@ -1,0 +1,39 @@
+"""The shared helpers: distance along the path, mirroring, and the path overlay, against hand-computed values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from offroad_path.geometry.path import distance_along, mirror, path_length
+from offroad_path.viz import OUTLINE, overlay
+
+
+def test_distance_along_positions_and_poses():
+    positions = np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 4.0], [3.0, 0.0, 4.0], [3.0, 12.0, 9.0]])  # 5 m, 0 m, 13 m
+    np.testing.assert_allclose(distance_along(positions), [0.0, 5.0, 5.0, 18.0])
+    poses = np.tile(np.eye(4), (4, 1, 1))
+    poses[:, :3, 3] = positions
+    np.testing.assert_allclose(distance_along(poses), [0.0, 5.0, 5.0, 18.0])
+    assert path_length(poses) == pytest.approx(18.0)
+
+
+def test_mirror_flips_left_right_and_is_contiguous():
+    image = np.arange(24, dtype=np.uint8).reshape(2, 4, 3)
+    flipped = mirror(image)
+    assert flipped.flags.c_contiguous and np.array_equal(flipped[:, 0], image[:, 3])
+    assert np.array_equal(mirror(flipped), image)
+
+
+def test_overlay_blends_the_path_toward_green_and_leaves_the_rest():
+    image = np.full((20, 30, 3), 100, np.uint8)
+    path = np.zeros((20, 30), bool)
+    path[5:15, 10:20] = True
+    plain = overlay(image, path, alpha=0.5, outline=False)
+    assert (plain[path] == [50, 178, 50]).all()  # rint(0.5 * 100 + 0.5 * (0, 255, 0))
+    assert (plain[~path] == 100).all()
+    outlined = overlay(image, path, alpha=0.5)
+    red, green, blue = outlined[5, 12].astype(int)  # the border, drawn anti-aliased in yellow
+    assert red > 200 and green > 200 and blue < 40 and OUTLINE == (255, 255, 0)
+    assert (outlined[10, 15] == [50, 178, 50]).all()
+    assert (outlined[0, 0] == 100).all()
