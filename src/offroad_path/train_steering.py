@@ -77,7 +77,8 @@ def train_steering(cfg: DictConfig) -> dict:
         scatter_plot(true, predicted, tmp / "scatter.png")
         return {**steering_metrics(true, predicted), "by_true_magnitude": bins}
 
-    logger = training_logger(cfg, "train_steering", "pilotnet", {"steering": OmegaConf.to_container(s, resolve=True)})
+    tags = {"stage": "train_steering", "model": "pilotnet"}
+    logger = training_logger(cfg, "train_steering pilotnet", tags, {"steering": OmegaConf.to_container(s, resolve=True)})
     results = fit(task, data, spec, logger, write_predictions)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
     true, predicted = scored["true"], scored["predicted"]

@@ -71,19 +71,16 @@ class LogSamples(L.Callback):
         )
 
 
-def training_logger(cfg: DictConfig, stage: str, model: str, params: dict) -> MLFlowLogger | None:
-    """The run's Lightning logger from conf/logger, tagged with its stage and model, a child of
-    its sweep in a multirun, with `params` logged; None when mlflow.enabled is false."""
+def training_logger(cfg: DictConfig, run_name: str, tags: dict, params: dict) -> MLFlowLogger | None:
+    """The run's Lightning logger from conf/logger, with the experiment's name in its tags, a child
+    of its sweep in a multirun, with `params` logged; None when mlflow.enabled is false."""
     if not cfg.mlflow.enabled:
         return None
-    tags = {"stage": stage, "experiment_name": cfg.experiment_name, "model": model}
-    if stage != "train_steering":
-        tags["pretraining"] = cfg.pretraining.name
+    tags = {**tags, "experiment_name": cfg.experiment_name}
     if parent := multirun_parent(cfg):
         tags["mlflow.parentRunId"] = parent
     # The tracking URI is always explicit: Lightning's logger would otherwise fall back to ./mlruns.
     experiment_id(cfg.mlflow)  # created with its artifact location, which the logger would not set
-    run_name = f"{stage} {model}" if stage == "train_steering" else f"{stage} {model}-{cfg.pretraining.name}"
     logger = instantiate(cfg.logger, run_name=run_name, tracking_uri=tracking_uri(cfg.mlflow), tags=tags)
     logger.log_hyperparams(flatten(params))
     return logger
@@ -273,7 +270,8 @@ def fit_segmentation(
         files.append(Path(cfg.pretraining.checkpoint or cfg.pretraining.weights_path or ""))
     spec = RunSpec(stage, out_dir, inputs, cfg.train.seed, cfg.train.resume, cfg.trainer, cfg.callbacks, cfg.trainer.max_epochs, identity,
                    files, [LogSamples(cfg.train.sample_images)])  # fmt: skip
-    logger = training_logger(cfg, stage, m.name, OmegaConf.to_container(cfg, resolve=True))
+    tags = {"stage": stage, "model": m.name, "pretraining": cfg.pretraining.name}
+    logger = training_logger(cfg, f"{stage} {m.name}-{cfg.pretraining.name}", tags, OmegaConf.to_container(cfg, resolve=True))
     return fit(task, data, spec, logger, write_more)
 
 
