@@ -127,8 +127,10 @@ class DisparityConfig:
 
 @dataclass
 class OdometryConfig:
-    """Stereo visual odometry (offroad_path.odometry.stereo_vo)."""
+    """Stereo visual odometry (offroad_path.odometry): the front end's settings are shared; the
+    window, fallback and depth-weighting settings are the windowed estimator's."""
 
+    method: str = setting(one_of(("windowed", "frame_to_frame")))
     max_features: int = MISSING
     bucket_rows: int = MISSING
     bucket_cols: int = MISSING
@@ -144,6 +146,11 @@ class OdometryConfig:
     refine_iterations: int = MISSING
     huber_px: float = MISSING
     min_inliers: int = MISSING
+    window: int = setting(at_least(2))  # keyframes in the bundle adjustment
+    window_iterations: int = setting(at_least(1))
+    stereo_depth_m: float = setting(positive())  # beyond it, the right image's sigma grows as (z / this)^2
+    max_skipped_frames: int = setting(at_least(0))
+    fallback_feature_factor: int = setting(at_least(1))
 
 
 @dataclass

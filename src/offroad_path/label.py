@@ -20,6 +20,7 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.labelling.labeller import check_inputs, label_sequence
+from offroad_path.odometry.windowed import FALLBACKS
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 from offroad_path.utils.cli import hydra_stage
@@ -40,6 +41,21 @@ def sequence_names(roots: list[Path], in_dir: Path) -> list[str]:
     return ["_".join(root.relative_to(in_dir).parts) or root.name for root in roots]
 
 
+def drift_metrics(drifts: list[dict]) -> dict[str, float]:
+    """Over the sequences with a drift figure: the mean and the worst sequence's drift, and the
+    extreme scale ratios of any segment and any step."""
+    return {
+        "translation_drift_pct": float(np.mean([d["translation_drift_pct"] for d in drifts])),
+        "translation_drift_pct_worst": max(d["translation_drift_pct"] for d in drifts),
+        "rotation_drift_deg_per_m": float(np.mean([d["rotation_drift_deg_per_m"] for d in drifts])),
+        "rotation_drift_deg_per_m_worst": max(d["rotation_drift_deg_per_m"] for d in drifts),
+        "scale_ratio_min": min(d["scale_ratio_min"] for d in drifts),
+        "scale_ratio_max": max(d["scale_ratio_max"] for d in drifts),
+        "step_scale_ratio_min": min(d["step_scale_ratio_min"] for d in drifts),
+        "step_scale_ratio_max": max(d["step_scale_ratio_max"] for d in drifts),
+    }
+
+
 def label(cfg: DictConfig) -> dict:
     in_dir, out_dir = Path(cfg.label.in_dir), Path(cfg.label.out_dir)
     check_output_dir(out_dir, "label.out_dir", [in_dir])
@@ -58,9 +74,11 @@ def label(cfg: DictConfig) -> dict:
             "vo_failed_steps": sum(s.get("vo_failed_steps", 0) for s in summaries),
             "warnings": sum(len(s["warnings"]) for s in summaries),
         }
+        if any("vo_fallbacks" in s for s in summaries):
+            for name in FALLBACKS:
+                metrics[f"vo_{name}"] = sum(s["vo_fallbacks"][name] for s in summaries if "vo_fallbacks" in s)
         if drifts:
-            for key in ("translation_drift_pct", "rotation_drift_deg_per_m"):
-                metrics[key] = float(np.mean([d[key] for d in drifts]))
+            metrics |= drift_metrics(drifts)
         if not metrics["labels"]:
             raise ValueError(
                 f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"])
@@ -75,7 +93,8 @@ def label(cfg: DictConfig) -> dict:
     log.info(
         "labelled %d sequences: %d segments kept, %d dropped, %d labels written to %s%s",
         metrics["sequences"], metrics["labels"], metrics["segments_dropped"], metrics["labels"], out_dir,
-        f"; VO drift {metrics['translation_drift_pct']:.2f} %, {metrics['rotation_drift_deg_per_m']:.4f} deg/m" if drifts else "",
+        f"; VO drift {metrics['translation_drift_pct']:.2f} % (worst sequence {metrics['translation_drift_pct_worst']:.2f} %), "
+        f"{metrics['rotation_drift_deg_per_m']:.4f} deg/m" if drifts else "",
     )  # fmt: skip
     return metrics
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import logging
+from collections import Counter
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity
 from offroad_path.labelling.footprint import Occlusion, VehicleFootprint, footprint_depth, path_mask, swept_polygons
 from offroad_path.labelling.frame_selection import select_segments
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
+from offroad_path.odometry.windowed import FALLBACKS
 from offroad_path.sequence.errors import SequenceError
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import Sequence
@@ -170,17 +172,27 @@ def odometry_holds(run: OdometryRun, report: SegmentReport) -> bool:
 
 
 def write_odometry(out_dir: Path, run: OdometryRun, seq: Sequence, segment_m: float) -> dict:
-    """poses_vo.txt and steps.csv; the summary's VO figures (failed steps, drift against the
-    sequence's own poses when it has them, else a warning saying why not)."""
+    """poses_vo.txt, steps.csv (every step, with the fallback that made it) and, when the sequence
+    has its own poses, drift.csv (every scored segment); the summary's VO figures."""
     (out_dir / "poses_vo.txt").write_text(poses_to_text(run.poses))
-    rows = [{"from": k, "to": k + 1, "ok": s.ok, "features": s.features, "tracked": s.tracked, "inliers": s.inliers, "reason": s.reason}
-            for k, s in enumerate(run.steps)]  # fmt: skip
-    _write_csv(out_dir / "steps.csv", rows, ["from", "to", "ok", "features", "tracked", "inliers", "reason"])
-    found: dict = {"vo_failed_steps": int(run.failed.sum()), "drift": None, "warnings": []}
+    columns = ["from", "to", "ok", "features", "tracked", "inliers", "fallback", "reason"]
+    rows = [{"from": k, "to": k + 1, **{c: getattr(s, c) for c in columns[2:]}} for k, s in enumerate(run.steps)]
+    _write_csv(out_dir / "steps.csv", rows, columns)
+    fallbacks = Counter(s.fallback for s in run.steps if s.fallback)
+    found: dict = {
+        "vo_failed_steps": int(run.failed.sum()),
+        "vo_pieces": len(run.pieces),
+        "vo_fallbacks": {name: fallbacks.get(name, 0) for name in FALLBACKS},
+        "drift": None,
+        "warnings": [],
+    }
     if seq.poses is not None:
-        found["drift"], problem = drift(run.poses, seq.poses, segment_m)
+        result, problem = drift(run.poses, seq.poses, segment_m, run.pieces)
         if problem:
             found["warnings"].append(f"no drift figure: {problem}")
+        else:
+            found["drift"] = result.summary()
+            _write_csv(out_dir / "drift.csv", result.segments, list(result.segments[0]))
     return found
 
 

@@ -1,0 +1,24 @@
+"""What one odometry step reports, whichever estimator made it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class StepResult:
+    """The motion from frame k to k+1: `motion` maps camera-k points into camera k+1.
+
+    A failed step's motion is only the constant-velocity guess that keeps the trajectory in one
+    array; segments never span it and drift is scored on the pieces between failures.
+    """
+
+    ok: bool
+    motion: np.ndarray  # (4, 4)
+    features: int  # points with a stereo match in frame k (landmarks held, for the windowed VO)
+    tracked: int  # of those, tracked into frame k+1
+    inliers: int
+    reason: str = ""  # why the step failed
+    fallback: str = ""  # the fallback that made the step: more_features, wide_search, skipped_frame

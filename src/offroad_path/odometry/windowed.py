@@ -1,0 +1,272 @@
+"""Keyframe stereo visual odometry with a sliding-window bundle adjustment (the default,
+`label.odometry.method=windowed`).
+
+Landmarks are tracked from frame to frame by Lucas-Kanade (the front end of `features.py`); each
+frame's pose comes from RANSAC PnP against the landmarks' world positions; every keyframe joins a
+window of the last `window` keyframes, whose poses and landmarks are refined together by
+Levenberg-Marquardt in GTSAM on left and right reprojections (`GenericStereoFactor3D`, Huber loss),
+in the spirit of ORB-SLAM2's local bundle adjustment and SOFT's careful feature handling.
+
+Why far points are down-weighted: a stereo match's disparity carries a small constant bias on real
+images (0.2 px on the KITTI snippet, see docs/odometry.md); depth error grows as z^2 / (f B), so far
+points pull the translation long. Their right-image residual's sigma grows as (z / stereo_depth_m)^2
+beyond `stereo_depth_m`: far points still fix rotation (their left reprojections are untouched),
+near points fix scale.
+
+A weak step is retried with more features, then with a wider search, then skipped (the next frame
+is matched to the last good one and the skipped pose interpolated); only then does the step fail,
+which ends a piece of the trajectory: the next frame starts a new one and no segment spans the break.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import gtsam
+import numpy as np
+
+from offroad_path.config import OdometryConfig
+from offroad_path.odometry.features import FrontEnd
+from offroad_path.odometry.steps import StepResult
+from offroad_path.sequence.calibration import StereoCalibration
+
+FALLBACKS = ("more_features", "wide_search", "skipped_frame")  # in the order a weak step tries them
+
+
+@dataclass
+class _Reference:
+    """The last frame that was tracked: where the next frame's tracks start."""
+
+    frame: int
+    left: np.ndarray
+    right: np.ndarray
+    ids: np.ndarray  # (M,) landmark ids of the tracks
+    uv: np.ndarray  # (M, 2) float32 left pixels
+
+
+@dataclass
+class _Keyframe:
+    frame: int
+    ids: np.ndarray  # (M,) landmarks seen with a stereo match
+    uv_l: np.ndarray  # (M, 2)
+    uv_r: np.ndarray  # (M, 2)
+
+
+@dataclass
+class _Step:
+    features: int = 0
+    tracked: int = 0
+    inliers: int = 0
+    ok: bool = True
+    reason: str = ""
+    fallback: str = ""
+
+
+class WindowedOdometry:
+    """Feed grey frames in order with `start` then `step`; `finish` gives every frame's pose."""
+
+    def __init__(self, calibration: StereoCalibration, cfg: OdometryConfig):
+        self.cfg = cfg
+        self.front = FrontEnd(calibration, cfg)
+        f = self.front
+        self._calibration = gtsam.Cal3_S2Stereo(f.fx, f.fy, 0.0, f.cx, f.cy, f.baseline)
+        self._points = np.zeros((0, 3))  # landmark positions in the world (first camera) frame
+        self._poses: list[np.ndarray | None] = []  # camera-to-world per frame; None while skipped
+        self._steps: list[_Step] = []
+        self._window: list[_Keyframe] = []
+        self._velocity = np.eye(4)  # the last motion from one frame to the next (camera k to k+1)
+        self._ref: _Reference | None = None
+        self._noise: dict[int, gtsam.noiseModel.Base] = {}
+
+    # --- the per-frame loop -------------------------------------------------------------------
+
+    def start(self, left: np.ndarray, right: np.ndarray) -> int:
+        """Begin at a frame; returns how many landmarks it has."""
+        self._poses.append(np.eye(4))
+        return self._begin_piece(0, left, right)
+
+    def step(self, left: np.ndarray, right: np.ndarray) -> None:
+        """Track frame k (grey uint8 images) from the last tracked frame."""
+        if self._ref is None:
+            raise RuntimeError("call start() with the first frame before step()")
+        k = len(self._poses)
+        self._poses.append(None)
+        step = _Step()
+        self._steps.append(step)
+        try:
+            located = self._locate(k, left, step)
+        except cv2.error as e:  # degenerate geometry inside OpenCV: a weak step, not a crash
+            located, step.reason = None, f"OpenCV failed: {e.err}"
+        if located is not None:
+            self._accept(k, left, right, *located)
+            return
+        if k - self._ref.frame <= self.cfg.max_skipped_frames:
+            step.fallback = "skipped_frame"
+            return
+        for s in self._steps[self._ref.frame : k]:  # every step since the last tracked frame
+            s.ok, s.reason = False, s.reason or step.reason
+        self._poses[k] = self._poses[self._ref.frame] @ np.linalg.matrix_power(np.linalg.inv(self._velocity), k - self._ref.frame)
+        self._interpolate_skipped(self._ref.frame, k)
+        self._begin_piece(k, left, right)
+
+    def finish(self) -> tuple[np.ndarray, list[StepResult]]:
+        """(N, 4, 4) camera-to-first-camera poses and the N-1 steps between them."""
+        last = self._ref.frame if self._ref is not None else 0
+        n = len(self._poses)
+        if last < n - 1:  # skipped frames at the very end: nothing to interpolate towards
+            for s in self._steps[last:]:
+                s.ok, s.reason = False, s.reason or "the sequence ended on frames that could not be tracked"
+            for k in range(last + 1, n):
+                self._poses[k] = self._poses[k - 1] @ np.linalg.inv(self._velocity)
+        poses = np.array(self._poses)
+        steps = [
+            StepResult(s.ok, np.linalg.inv(poses[k + 1]) @ poses[k], s.features, s.tracked, s.inliers, s.reason, s.fallback)
+            for k, s in enumerate(self._steps)
+        ]
+        return poses, steps
+
+    # --- locating a frame ---------------------------------------------------------------------
+
+    def _locate(self, k: int, left: np.ndarray, step: _Step) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(camera-to-world pose, landmark ids, left pixels of the PnP inliers) of frame k, trying
+        the fallbacks in order; None, with step.reason, when all fail."""
+        ref, cfg = self._ref, self.cfg
+        gap = k - ref.frame
+        predicted = self._poses[ref.frame] @ np.linalg.matrix_power(np.linalg.inv(self._velocity), gap)
+        for fallback, wide in [("", False), (FALLBACKS[0], False), (FALLBACKS[1], True)]:
+            if fallback == "more_features":
+                self._add_landmarks(ref, factor=cfg.fallback_feature_factor)
+            xyz = self._points[ref.ids]
+            guess = self.front.project(_transform(np.linalg.inv(predicted), xyz))[0]
+            uv, ok = self.front.track(ref.left, left, ref.uv, guess, wide=wide)
+            step.features, step.tracked = len(ref.ids), int(ok.sum())
+            world_to_camera, inlier = self.front.pnp(xyz[ok], uv[ok])
+            step.inliers = int(inlier.sum())
+            if world_to_camera is not None and step.inliers >= cfg.min_inliers:
+                step.fallback = fallback if gap == 1 else "skipped_frame"
+                chosen = np.flatnonzero(ok)[inlier]
+                return np.linalg.inv(world_to_camera), ref.ids[chosen], uv[chosen]
+            step.reason = f"only {step.inliers} PnP inliers of {step.tracked} tracks after more features and a wider search"
+        return None
+
+    def _accept(self, k: int, left: np.ndarray, right: np.ndarray, *located: np.ndarray) -> None:
+        """Frame k becomes a keyframe: its stereo observations join the window, which is adjusted;
+        its tracks and new landmarks are where the next frame starts."""
+        pose, ids, uv = located
+        ref = self._ref
+        self._poses[k] = pose
+        # Stereo matches start where the landmark's current depth says they should be.
+        guess = self.front.project(_transform(np.linalg.inv(pose), self._points[ids]))[1]
+        uv_r, ok = self.front.stereo_match(left, right, uv, guess)
+        self._window.append(_Keyframe(k, ids[ok], uv[ok], uv_r[ok]))
+        self._window = self._window[-self.cfg.window :]
+        self._adjust()
+        self._interpolate_skipped(ref.frame, k)
+        gap = k - ref.frame
+        if gap == 1:
+            self._velocity = np.linalg.inv(self._poses[k]) @ self._poses[ref.frame]
+        self._ref = _Reference(k, left, right, ids, uv)
+        self._add_landmarks(self._ref, factor=1)
+
+    def _begin_piece(self, k: int, left: np.ndarray, right: np.ndarray) -> int:
+        """Start tracking afresh at frame k (the first frame, or after a failure)."""
+        self._window = []
+        self._ref = _Reference(k, left, right, np.zeros(0, int), np.zeros((0, 2), np.float32))
+        self._add_landmarks(self._ref, factor=1)
+        return len(self._ref.ids)
+
+    def _add_landmarks(self, ref: _Reference, factor: int) -> None:
+        """New landmarks from stereo matches of fresh corners where ref's view has few tracks;
+        `factor` > 1 asks for that many times the features, down to a lower corner quality."""
+        cfg = self.cfg
+        corners = self.front.corners(ref.left, cfg.max_features * factor, cfg.corner_quality / factor, taken=ref.uv)
+        if len(ref.uv) and len(corners):  # not on top of a track
+            near = np.min(np.linalg.norm(corners[:, None] - ref.uv[None], axis=2), axis=1) < 3.0
+            corners = corners[~near]
+        matched, ok = self.front.stereo_match(ref.left, ref.right, corners)
+        xyz = _transform(self._poses[ref.frame], self.front.triangulate(corners[ok], matched[ok]))
+        ids = np.arange(len(self._points), len(self._points) + len(xyz))
+        self._points = np.concatenate([self._points, xyz])
+        ref.ids, ref.uv = np.concatenate([ref.ids, ids]), np.concatenate([ref.uv, corners[ok]])
+        if not self._window or self._window[-1].frame != ref.frame:
+            self._window.append(_Keyframe(ref.frame, ids[:0], corners[:0], corners[:0]))
+        kf = self._window[-1]
+        kf.ids, kf.uv_l, kf.uv_r = (
+            np.concatenate([kf.ids, ids]),
+            np.concatenate([kf.uv_l, corners[ok]]),
+            np.concatenate([kf.uv_r, matched[ok]]),
+        )
+
+    def _interpolate_skipped(self, a: int, b: int) -> None:
+        """Poses of the frames skipped between tracked frames a and b, spaced evenly on the motion."""
+        if b - a < 2:
+            return
+        motion = np.linalg.inv(self._poses[a]) @ self._poses[b]  # frame b in frame a
+        rvec = cv2.Rodrigues(motion[:3, :3])[0]
+        for k in range(a + 1, b):
+            s = (k - a) / (b - a)
+            part = np.eye(4)
+            part[:3, :3], part[:3, 3] = cv2.Rodrigues(rvec * s)[0], motion[:3, 3] * s
+            self._poses[k] = self._poses[a] @ part
+
+    # --- bundle adjustment --------------------------------------------------------------------
+
+    def _adjust(self) -> None:
+        """Levenberg-Marquardt over the window's poses and the landmarks seen at least twice in it;
+        the oldest keyframe's pose is held fixed."""
+        if len(self._window) < 2:
+            return
+        landmarks, count = np.unique(np.concatenate([kf.ids for kf in self._window]), return_counts=True)
+        shared = landmarks[count >= 2]
+        if not len(shared):
+            return
+        graph, values = self._window_graph(shared)
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(self.cfg.window_iterations)
+        params.setLinearSolverType("SEQUENTIAL_CHOLESKY")  # 3x faster here than the multifrontal default
+        try:
+            result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        except RuntimeError:  # an indeterminate system (too few shared landmarks): keep the PnP poses
+            return
+        for kf in self._window:
+            self._poses[kf.frame] = result.atPose3(gtsam.symbol("x", kf.frame)).matrix()
+        for i in shared.tolist():
+            self._points[i] = result.atPoint3(gtsam.symbol("l", i))
+
+    def _window_graph(self, shared: np.ndarray) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+        """Stereo reprojection factors of the window's observations of `shared` landmarks, and the
+        current poses and positions as the starting point."""
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        for i, kf in enumerate(self._window):
+            key, pose = gtsam.symbol("x", kf.frame), gtsam.Pose3(self._poses[kf.frame])
+            values.insert(key, pose)
+            if i == 0:
+                graph.add(gtsam.NonlinearEqualityPose3(key, pose))
+            levels = self._noise_levels(np.maximum(kf.uv_l[:, 0] - kf.uv_r[:, 0], 1e-3))
+            for j in np.flatnonzero(np.isin(kf.ids, shared)).tolist():
+                measured = gtsam.StereoPoint2(kf.uv_l[j, 0], kf.uv_r[j, 0], kf.uv_l[j, 1])
+                landmark = gtsam.symbol("l", int(kf.ids[j]))
+                graph.add(gtsam.GenericStereoFactor3D(measured, self._noise_model(levels[j]), key, landmark, self._calibration))
+        for i in shared.tolist():
+            values.insert(gtsam.symbol("l", i), self._points[i])
+        return graph, values
+
+    def _noise_levels(self, disparity: np.ndarray) -> np.ndarray:
+        """Per observation, the right image's sigma level: 0 up to stereo_depth_m, then one level
+        per doubling of (z / stereo_depth_m)^2, i.e. per sqrt(2) in depth."""
+        z = self.front.fx * self.front.baseline / disparity
+        ratio = np.maximum(z / self.cfg.stereo_depth_m, 1.0)
+        return np.round(4 * np.log2(ratio)).astype(int)  # quarter-octaves of sigma = ratio^2
+
+    def _noise_model(self, level: int) -> gtsam.noiseModel.Base:
+        if level not in self._noise:
+            sigma = self.cfg.huber_px
+            base = gtsam.noiseModel.Diagonal.Sigmas(np.array([1.0, 2.0 ** (level / 2), 1.0]))
+            self._noise[level] = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(sigma), base)
+        return self._noise[level]
+
+
+def _transform(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 rigid transform to (N, 3) points."""
+    return xyz @ T[:3, :3].T + T[:3, 3]
