@@ -34,13 +34,27 @@ def read_report(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def test_odometry_follows_the_rendered_drive(compose_config, drive):
+@pytest.mark.parametrize("method", ["windowed", "frame_to_frame"])
+def test_odometry_follows_the_rendered_drive(compose_config, drive, method):
     seq = open_sequence(drive / "drive")
-    run = run_odometry(seq, OdometryConfig(**compose_config().label.odometry))
+    run = run_odometry(seq, OdometryConfig(**compose_config(f"label.odometry.method={method}").label.odometry))
+    assert not run.failed.any() and run.pieces == [(0, 39)]
+    errors, problem = drift(run.poses, seq.poses, 20.0, run.pieces)
+    assert problem is None and errors.translation_drift_pct < 0.6
+    assert errors.rotation_drift_deg_per_m < 0.03
+    assert 0.99 < errors.scale_ratio_min <= errors.scale_ratio_median <= errors.scale_ratio_max < 1.01
+
+
+def test_weak_steps_are_saved_by_more_features(compose_config, drive):
+    """Four corners per bucket give fewer than 60 PnP inliers on some steps; the fallback's twelve do."""
+    seq = open_sequence(drive / "drive")
+    overrides = ("label.odometry.max_features=200", "label.odometry.min_inliers=60")
+    run = run_odometry(seq, OdometryConfig(**compose_config(*overrides).label.odometry))
     assert not run.failed.any()
-    errors, problem = drift(run.poses, seq.poses, 20.0)
-    assert problem is None and errors["translation_drift_pct"] < 1.0
-    assert errors["rotation_drift_deg_per_m"] < 0.03
+    assert sum(s.fallback == "more_features" for s in run.steps) >= 3
+    assert drift(run.poses, seq.poses, 20.0, run.pieces)[0].translation_drift_pct < 1.0
+    plain = run_odometry(seq, OdometryConfig(**compose_config(*overrides, "label.odometry.method=frame_to_frame").label.odometry))
+    assert plain.failed.any()  # the same steps without the fallback
 
 
 def test_label_stage_writes_its_contract_and_tracks_it(compose_config, drive, tmp_path):
@@ -77,12 +91,45 @@ def test_vo_labels_agree_with_ground_truth_labels(compose_config, drive, tmp_pat
     assert exact["mean_iou"] > 0.93
 
 
-def test_a_blacked_out_frame_drops_its_segments_with_the_reason(compose_config, drive, tmp_path):
+def darken(image: np.ndarray) -> np.ndarray:
+    return (image * 0.02).astype(np.uint8)  # about five grey levels left
+
+
+def fog(image: np.ndarray) -> np.ndarray:
+    return np.clip(128 + (image.astype(float) - 128) * 0.02, 0, 255).astype(np.uint8)  # 2 % contrast
+
+
+def blank_wall(image: np.ndarray) -> np.ndarray:
+    return np.full_like(image, 90)
+
+
+def spoil(recordings: Path, frames: dict) -> None:
+    for k, change in frames.items():
+        for side in ("image_l", "image_r"):
+            path = recordings / "drive" / side / f"{k:06d}.png"
+            cv2.imwrite(str(path), change(cv2.imread(str(path))))
+
+
+def test_nearly_textureless_frames_are_skipped_without_failure(compose_config, drive, tmp_path):
     recordings = tmp_path / "recordings"
     shutil.copytree(drive, recordings)
-    for side in ("image_l", "image_r"):
-        cv2.imwrite(str(recordings / "drive" / side / "000012.png"), np.zeros((288, 512, 3), np.uint8))
+    spoil(recordings, {11: darken, 20: fog, 30: blank_wall})
     metrics = label(label_config(compose_config, recordings, tmp_path))
+    out = tmp_path / "labels" / "drive"
+    steps = read_report(out / "steps.csv")
+    assert all(r["ok"] == "True" for r in steps)
+    assert [int(r["from"]) for r in steps if r["fallback"] == "skipped_frame"] == [10, 11, 19, 20, 29, 30]
+    assert metrics["vo_skipped_frame"] == 6 and metrics["vo_failed_steps"] == metrics["segments_dropped"] == 0
+    assert metrics["translation_drift_pct"] < 1.0
+    segments = read_report(out / "drift.csv")
+    assert len(segments) >= 20 and all(0.98 < float(s["scale_ratio"]) < 1.02 for s in segments)
+
+
+def test_frame_to_frame_drops_the_segments_over_a_dark_frame_with_the_reason(compose_config, drive, tmp_path):
+    recordings = tmp_path / "recordings"
+    shutil.copytree(drive, recordings)
+    spoil(recordings, {12: lambda image: np.zeros_like(image)})
+    metrics = label(label_config(compose_config, recordings, tmp_path, "label.odometry.method=frame_to_frame"))
     report = read_report(tmp_path / "labels" / "drive" / "report.csv")
     dropped = [r for r in report if r["kept"] == "False"]
     assert dropped and metrics["segments_dropped"] == len(dropped)
@@ -95,6 +142,8 @@ def test_a_blacked_out_frame_drops_its_segments_with_the_reason(compose_config, 
         written = (tmp_path / "labels" / "drive" / "label" / f"{int(r['f0']):06d}.png").exists()
         assert written == (r["kept"] == "True")
     assert any(int(r["f0"]) > 12 and r["kept"] == "True" for r in report)  # odometry recovers after it
+    drift_rows = read_report(tmp_path / "labels" / "drive" / "drift.csv")
+    assert all(int(r["to"]) <= 11 or int(r["from"]) >= 13 for r in drift_rows)  # no segment spans the failure
 
 
 BAD = {
@@ -143,4 +192,13 @@ def test_odometry_on_the_real_kitti_snippet(compose_config, kitti_snippet):
     seq = open_sequence(kitti_snippet)
     run = run_odometry(seq, OdometryConfig(**compose_config().label.odometry))
     assert not run.failed.any()
-    assert drift(run.poses, seq.poses, 20.0)[0]["translation_drift_pct"] < 1.5
+    errors = drift(run.poses, seq.poses, 20.0, run.pieces)[0]
+    assert errors.translation_drift_pct <= 0.8
+    assert 0.98 <= errors.step_scale_ratio_min <= errors.step_scale_ratio_max <= 1.02
+
+
+def test_frame_to_frame_odometry_on_the_real_kitti_snippet(compose_config, kitti_snippet):
+    seq = open_sequence(kitti_snippet)
+    run = run_odometry(seq, OdometryConfig(**compose_config("label.odometry.method=frame_to_frame").label.odometry))
+    assert not run.failed.any()
+    assert drift(run.poses, seq.poses, 20.0, run.pieces)[0].translation_drift_pct < 1.5

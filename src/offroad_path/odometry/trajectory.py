@@ -101,9 +101,9 @@ def drift(
         if path_length(ref) <= segment_m:
             continue
         errors = {}
-        for name, relation, scale in (
-            ("translation_pct", metrics.PoseRelation.translation_part, 100.0 / segment_m),
-            ("rotation_deg_per_m", metrics.PoseRelation.rotation_angle_deg, 1.0 / segment_m),
+        for name, relation in (
+            ("translation", metrics.PoseRelation.translation_part),
+            ("rotation", metrics.PoseRelation.rotation_angle_deg),
         ):
             rpe = metrics.RPE(
                 relation, delta=segment_m, delta_unit=Unit.meters, rel_delta_tol=0.1, all_pairs=True, pairs_from_reference=True
@@ -112,22 +112,18 @@ def drift(
                 rpe.process_data((PosePath3D(poses_se3=list(ref)), PosePath3D(poses_se3=list(est))))
             except Exception:  # evo's FilterException / MetricsException: no pair of frames fits
                 break
-            errors[name] = np.asarray(rpe.error) * scale
+            errors[name] = np.asarray(rpe.error)
         if len(errors) < 2:
             continue
         pairs = metrics.id_pairs_from_delta(list(ref), segment_m, Unit.meters, 0.1, all_pairs=True)  # RPE's pairs, in its order
-        for (i, j), t, r in zip(pairs, errors["translation_pct"], errors["rotation_deg_per_m"], strict=True):
-            true = np.linalg.norm(ref[j, :3, 3] - ref[i, :3, 3])
-            ratio = np.linalg.norm(est[j, :3, 3] - est[i, :3, 3]) / true
+        for (i, j), t, r in zip(pairs, errors["translation"], errors["rotation"], strict=True):
+            # Each error over the segment's own true length (evo admits lengths within 10 % of segment_m).
+            true = path_length(ref[i : j + 1])
+            ratio = np.linalg.norm(est[j, :3, 3] - est[i, :3, 3]) / np.linalg.norm(ref[j, :3, 3] - ref[i, :3, 3])
             segments.append(
-                {
-                    "from": first + i,
-                    "to": first + j,
-                    "translation_pct": float(t),
-                    "rotation_deg_per_m": float(r),
-                    "scale_ratio": float(ratio),
-                }
-            )
+                {"from": first + i, "to": first + j, "length_m": float(true), "translation_pct": float(100 * t / true),
+                 "rotation_deg_per_m": float(r / true), "scale_ratio": float(ratio)}
+            )  # fmt: skip
     if not segments:
         return None, f"evo found no {segment_m:g} m segment within a piece of odometry without failure"
     ratios = [s["scale_ratio"] for s in segments]
