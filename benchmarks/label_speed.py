@@ -3,7 +3,8 @@
     python benchmarks/label_speed.py [--in-dir data/synthetic]
 
 Runs the real label stage (VO on every frame, StereoSGBM and the footprint label at every f0,
-reports) over the rendered laptop sequences with MLflow off, on one worker and on one per core.
+reports) over the rendered laptop sequences with MLflow off, on one worker and on one per core,
+with each odometry method (`label.odometry.method`), all in one run so the figures compare.
 Render the input first (`dvc repro synthesize` or `python -m offroad_path.synthesize`).
 """
 
@@ -31,17 +32,22 @@ def main() -> None:
     frames = sum(len(open_sequence(p)) for p in find_sequences(args.in_dir))
     register_configs()
     cores = os.cpu_count() or 1
-    for workers in sorted({1, cores}):
-        with tempfile.TemporaryDirectory() as tmp, initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
-            cfg = compose(
-                "config",
-                overrides=[f"label.in_dir={args.in_dir}", f"label.out_dir={tmp}/labels", f"label.metrics_path={tmp}/m.json",
-                           f"label.workers={workers}", "mlflow.enabled=false"],
-            )  # fmt: skip
-            start = time.perf_counter()
-            metrics = label(cfg)
-            elapsed = time.perf_counter() - start
-        print(f"workers={workers}: {frames} frames, {metrics['labels']} labels in {elapsed:.1f} s: {frames / elapsed:.1f} frames/s")
+    for method in ("frame_to_frame", "windowed"):
+        for workers in sorted({1, cores}):
+            with tempfile.TemporaryDirectory() as tmp, initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+                cfg = compose(
+                    "config",
+                    overrides=[f"label.in_dir={args.in_dir}", f"label.out_dir={tmp}/labels", f"label.metrics_path={tmp}/m.json",
+                               f"label.workers={workers}", f"label.odometry.method={method}", "mlflow.enabled=false"],
+                )  # fmt: skip
+                start = time.perf_counter()
+                metrics = label(cfg)
+                elapsed = time.perf_counter() - start
+            print(
+                f"{method}, workers={workers}: {frames} frames, {metrics['labels']} labels in {elapsed:.1f} s: "
+                f"{frames / elapsed:.1f} frames/s; drift {metrics['translation_drift_pct']:.3f} % "
+                f"(worst sequence {metrics['translation_drift_pct_worst']:.3f} %), {metrics['vo_failed_steps']} failed steps"
+            )
 
 
 if __name__ == "__main__":
