@@ -147,6 +147,7 @@ class OdometryConfig:
     huber_px: float = MISSING
     min_inliers: int = MISSING
     window: int = setting(at_least(2))  # keyframes in the bundle adjustment
+    keyframe_distance_m: float = setting(at_least(0))  # a frame this far from the last keyframe becomes one
     window_iterations: int = setting(at_least(1))
     stereo_depth_m: float = setting(positive())  # beyond it, the right image's sigma grows as (z / this)^2
     max_skipped_frames: int = setting(at_least(0))

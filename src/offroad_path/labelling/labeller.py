@@ -175,7 +175,7 @@ def write_odometry(out_dir: Path, run: OdometryRun, seq: Sequence, segment_m: fl
     """poses_vo.txt, steps.csv (every step, with the fallback that made it) and, when the sequence
     has its own poses, drift.csv (every scored segment); the summary's VO figures."""
     (out_dir / "poses_vo.txt").write_text(poses_to_text(run.poses))
-    columns = ["from", "to", "ok", "features", "tracked", "inliers", "fallback", "reason"]
+    columns = ["from", "to", "ok", "keyframe", "features", "tracked", "inliers", "fallback", "reason"]
     rows = [{"from": k, "to": k + 1, **{c: getattr(s, c) for c in columns[2:]}} for k, s in enumerate(run.steps)]
     _write_csv(out_dir / "steps.csv", rows, columns)
     fallbacks = Counter(s.fallback for s in run.steps if s.fallback)

@@ -22,3 +22,4 @@ class StepResult:
     inliers: int
     reason: str = ""  # why the step failed
     fallback: str = ""  # the fallback that made the step: more_features, wide_search, skipped_frame
+    keyframe: bool = False  # frame k+1 joined the windowed estimator's keyframes

@@ -61,6 +61,7 @@ class _Step:
     ok: bool = True
     reason: str = ""
     fallback: str = ""
+    keyframe: bool = False
 
 
 class WindowedOdometry:
@@ -71,8 +72,10 @@ class WindowedOdometry:
         self.front = FrontEnd(calibration, cfg)
         f = self.front
         self._calibration = gtsam.Cal3_S2Stereo(f.fx, f.fy, 0.0, f.cx, f.cy, f.baseline)
-        self._points = np.zeros((0, 3))  # landmark positions in the world (first camera) frame
+        self._points = np.zeros((1024, 3))  # landmark positions in the world (first camera) frame
+        self._n_points = 0  # rows of _points in use; the array doubles when full
         self._poses: list[np.ndarray | None] = []  # camera-to-world per frame; None while skipped
+        self._anchors: dict[int, tuple[int, np.ndarray]] = {}  # non-keyframe -> (its keyframe, pose in it)
         self._steps: list[_Step] = []
         self._window: list[_Keyframe] = []
         self._velocity = np.eye(4)  # the last motion from one frame to the next (camera k to k+1)
@@ -119,9 +122,11 @@ class WindowedOdometry:
                 s.ok, s.reason = False, s.reason or "the sequence ended on frames that could not be tracked"
             for k in range(last + 1, n):
                 self._poses[k] = self._poses[k - 1] @ np.linalg.inv(self._velocity)
+        for k, (keyframe, relative) in self._anchors.items():  # follow their keyframes' adjustments
+            self._poses[k] = self._poses[keyframe] @ relative
         poses = np.array(self._poses)
         steps = [
-            StepResult(s.ok, np.linalg.inv(poses[k + 1]) @ poses[k], s.features, s.tracked, s.inliers, s.reason, s.fallback)
+            StepResult(s.ok, np.linalg.inv(poses[k + 1]) @ poses[k], s.features, s.tracked, s.inliers, s.reason, s.fallback, s.keyframe)
             for k, s in enumerate(self._steps)
         ]
         return poses, steps
@@ -151,23 +156,38 @@ class WindowedOdometry:
         return None
 
     def _accept(self, k: int, left: np.ndarray, right: np.ndarray, *located: np.ndarray) -> None:
-        """Frame k becomes a keyframe: its stereo observations join the window, which is adjusted;
-        its tracks and new landmarks are where the next frame starts."""
+        """Frame k is tracked. A keyframe's stereo observations join the window, which is adjusted,
+        and it gets new landmarks; another frame is anchored to the last keyframe. Its tracks are
+        where the next frame starts."""
         pose, ids, uv = located
         ref = self._ref
         self._poses[k] = pose
-        # Stereo matches start where the landmark's current depth says they should be.
-        guess = self.front.project(_transform(np.linalg.inv(pose), self._points[ids]))[1]
-        uv_r, ok = self.front.stereo_match(left, right, uv, guess)
-        self._window.append(_Keyframe(k, ids[ok], uv[ok], uv_r[ok]))
-        self._window = self._window[-self.cfg.window :]
-        self._adjust()
+        if self._is_keyframe(pose, len(ids)):
+            self._steps[k - 1].keyframe = True
+            # Stereo matches start where the landmark's current depth says they should be.
+            guess = self.front.project(_transform(np.linalg.inv(pose), self._points[ids]))[1]
+            uv_r, ok = self.front.stereo_match(left, right, uv, guess)
+            self._window.append(_Keyframe(k, ids[ok], uv[ok], uv_r[ok]))
+            self._window = self._window[-self.cfg.window :]
+            self._adjust()
+        else:
+            keyframe = self._window[-1].frame
+            self._anchors[k] = (keyframe, np.linalg.inv(self._poses[keyframe]) @ pose)
         self._interpolate_skipped(ref.frame, k)
-        gap = k - ref.frame
-        if gap == 1:
+        if k - ref.frame == 1:
             self._velocity = np.linalg.inv(self._poses[k]) @ self._poses[ref.frame]
         self._ref = _Reference(k, left, right, ids, uv)
-        self._add_landmarks(self._ref, factor=1)
+        if self._window[-1].frame == k:
+            self._add_landmarks(self._ref, factor=1)
+
+    def _is_keyframe(self, pose: np.ndarray, inliers: int) -> bool:
+        """A frame joins the window when it moved keyframe_distance_m from the last keyframe, or when
+        its tracks run thin (fewer than twice min_inliers)."""
+        if not self._window:
+            return True
+        last = self._poses[self._window[-1].frame]
+        moved = np.linalg.norm(pose[:3, 3] - last[:3, 3])
+        return bool(moved >= self.cfg.keyframe_distance_m or inliers < 2 * self.cfg.min_inliers)
 
     def _begin_piece(self, k: int, left: np.ndarray, right: np.ndarray) -> int:
         """Start tracking afresh at frame k (the first frame, or after a failure)."""
@@ -186,8 +206,11 @@ class WindowedOdometry:
             corners = corners[~near]
         matched, ok = self.front.stereo_match(ref.left, ref.right, corners)
         xyz = _transform(self._poses[ref.frame], self.front.triangulate(corners[ok], matched[ok]))
-        ids = np.arange(len(self._points), len(self._points) + len(xyz))
-        self._points = np.concatenate([self._points, xyz])
+        ids = np.arange(self._n_points, self._n_points + len(xyz))
+        while len(self._points) < self._n_points + len(xyz):
+            self._points = np.concatenate([self._points, np.zeros_like(self._points)])
+        self._points[ids] = xyz
+        self._n_points += len(xyz)
         ref.ids, ref.uv = np.concatenate([ref.ids, ids]), np.concatenate([ref.uv, corners[ok]])
         if not self._window or self._window[-1].frame != ref.frame:
             self._window.append(_Keyframe(ref.frame, ids[:0], corners[:0], corners[:0]))
