@@ -82,11 +82,18 @@ def test_label_stage_writes_its_contract_and_tracks_it(compose_config, drive, tm
     mask = cv2.imread(str(out / "label" / f"{int(kept[0]['f0']):06d}.png"), cv2.IMREAD_UNCHANGED)
     assert set(np.unique(mask)) == {0, 255} and mask.shape == (288, 512)
     assert len((out / "poses_vo.txt").read_text().splitlines()) == 40
-    assert metrics["translation_drift_pct"] < 1.0
+    assert metrics["translation_drift_pct"] <= metrics["translation_drift_pct_worst"] < 1.0  # one sequence: equal
+    assert metrics["vo_failed_steps"] == 0 and {"vo_more_features", "vo_wide_search", "vo_skipped_frame"} <= set(metrics)
+    assert 0.98 < metrics["scale_ratio_min"] <= metrics["scale_ratio_max"] < 1.02
+    steps = read_report(out / "steps.csv")
+    assert len(steps) == 39 and all(r["ok"] == "True" for r in steps)
+    # Frames 0.75 m apart are all keyframes (0.5 m), but for the last, where the vehicle slows to 0.48 m.
+    assert [r["to"] for r in steps if r["keyframe"] == "False"] == ["39"]
     with sqlite3.connect(tmp_path / "mlflow.db") as db:
         logged = dict(db.execute("select key, value from metrics").fetchall())
         params = dict(db.execute("select key, value from params").fetchall())
     assert logged["labels"] == metrics["labels"]
+    assert logged["translation_drift_pct_worst"] == pytest.approx(metrics["translation_drift_pct_worst"])
     assert params["distance_m"] == "20.0" and params["poses.source"] == "vo"
 
 

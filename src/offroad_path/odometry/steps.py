@@ -11,8 +11,9 @@ import numpy as np
 class StepResult:
     """The motion from frame k to k+1: `motion` maps camera-k points into camera k+1.
 
-    A failed step's motion is only the constant-velocity guess that keeps the trajectory in one
-    array; segments never span it and drift is scored on the pieces between failures.
+    A failed step's motion is only a guess that keeps the trajectory in one array (the identity
+    from the frame-to-frame VO, the last velocity from the windowed one); segments never span it
+    and drift is scored on the pieces between failures.
     """
 
     ok: bool

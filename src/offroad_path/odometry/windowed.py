@@ -232,6 +232,9 @@ class WindowedOdometry:
             part = np.eye(4)
             part[:3, :3], part[:3, 3] = cv2.Rodrigues(rvec * s)[0], motion[:3, 3] * s
             self._poses[k] = self._poses[a] @ part
+            if self._window:  # follow the latest keyframe's later adjustments, as located frames do
+                keyframe = self._window[-1].frame
+                self._anchors[k] = (keyframe, np.linalg.inv(self._poses[keyframe]) @ self._poses[k])
 
     # --- bundle adjustment --------------------------------------------------------------------
 
