@@ -134,14 +134,14 @@ def main() -> None:
         seq = open_sequence(path)
         for name, estimator in (("gtsam", Timed), ("scipy", SciPyWindows)):
             estimator.seconds.clear()
-            trajectory.WindowedOdometry = estimator  # run_odometry builds this class
+            trajectory.ESTIMATORS["windowed"] = estimator  # run_odometry builds this class
             run = run_odometry(seq, cfg)
             result = drift(run.poses, seq.poses, 20.0, run.pieces)[0]
             print(
                 f"{Path(path).name} {name}: {1000 * np.mean(estimator.seconds):.1f} ms per window over {len(estimator.seconds)} windows, "
                 f"drift {result.translation_drift_pct:.3f} %, scale ratio {result.scale_ratio_min:.4f} to {result.scale_ratio_max:.4f}"
             )
-    trajectory.WindowedOdometry = WindowedOdometry
+    trajectory.ESTIMATORS["windowed"] = WindowedOdometry
 
 
 if __name__ == "__main__":

@@ -32,7 +32,8 @@ class _Frame:
 
 
 class FrameToFrameOdometry:
-    """Frame-to-frame stereo odometry; feed grey frames in order with `step`."""
+    """Frame-to-frame stereo odometry; feed grey frames in order with `start` then `step`; `finish`
+    gives every frame's pose."""
 
     def __init__(self, calibration: StereoCalibration, cfg: OdometryConfig):
         self.cfg = cfg
@@ -41,6 +42,8 @@ class FrameToFrameOdometry:
         self.fx, self.fy, self.cx, self.cy, self.baseline = f.fx, f.fy, f.cx, f.cy, f.baseline
         self._previous: _Frame | None = None
         self._velocity = np.eye(4)  # the last successful motion
+        self._poses = [np.eye(4)]  # camera to first camera; a failed step adds no motion
+        self._steps: list[StepResult] = []
 
     def start(self, left: np.ndarray, right: np.ndarray) -> int:
         """Begin at a frame; returns how many stereo features it has."""
@@ -55,9 +58,16 @@ class FrameToFrameOdometry:
         current = self._frame(left, right)
         self._previous = current
         try:
-            return self._motion(prev, left, right)
+            result = self._motion(prev, left, right)
         except cv2.error as e:  # degenerate geometry inside OpenCV: a failed step, not a crash
-            return StepResult(False, np.eye(4), len(prev.xyz), 0, 0, f"OpenCV failed: {e.err}")
+            result = StepResult(False, np.eye(4), len(prev.xyz), 0, 0, f"OpenCV failed: {e.err}")
+        self._steps.append(result)
+        self._poses.append(self._poses[-1] @ np.linalg.inv(result.motion))
+        return result
+
+    def finish(self) -> tuple[np.ndarray, list[StepResult]]:
+        """(N, 4, 4) camera-to-first-camera poses and the N-1 steps between them."""
+        return np.array(self._poses), self._steps
 
     def _frame(self, left: np.ndarray, right: np.ndarray) -> _Frame:
         corners = self.front.corners(left, self.cfg.max_features, self.cfg.corner_quality)

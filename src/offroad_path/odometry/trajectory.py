@@ -35,26 +35,18 @@ class OdometryRun:
         return [(a + 1, b) for a, b in itertools.pairwise(breaks) if b > a + 1]
 
 
+ESTIMATORS = {"windowed": WindowedOdometry, "frame_to_frame": FrameToFrameOdometry}  # label.odometry.method
+
+
 def run_odometry(sequence: Sequence, cfg: OdometryConfig) -> OdometryRun:
     """Poses of every frame of `sequence` by the estimator cfg.method names."""
-    frames = ((sequence.load_left(k, grey=True), sequence.load_right(k, grey=True)) for k in range(len(sequence)))
-    if cfg.method == "windowed":
-        vo = WindowedOdometry(sequence.calibration, cfg)
-        vo.start(*next(frames))
-        for left, right in frames:
-            vo.step(left, right)
-        run = OdometryRun(*vo.finish())
-    elif cfg.method == "frame_to_frame":
-        f2f = FrameToFrameOdometry(sequence.calibration, cfg)
-        f2f.start(*next(frames))
-        poses, steps = [np.eye(4)], []
-        for left, right in frames:
-            steps.append(f2f.step(left, right))
-            motion = steps[-1].motion if steps[-1].ok else np.eye(4)
-            poses.append(poses[-1] @ np.linalg.inv(motion))
-        run = OdometryRun(np.array(poses), steps)
-    else:
-        raise ValueError(f"unknown label.odometry.method {cfg.method!r}; valid: windowed, frame_to_frame")
+    if cfg.method not in ESTIMATORS:
+        raise ValueError(f"unknown label.odometry.method {cfg.method!r}; valid: {', '.join(ESTIMATORS)}")
+    vo = ESTIMATORS[cfg.method](sequence.calibration, cfg)
+    vo.start(sequence.load_left(0, grey=True), sequence.load_right(0, grey=True))
+    for k in range(1, len(sequence)):
+        vo.step(sequence.load_left(k, grey=True), sequence.load_right(k, grey=True))
+    run = OdometryRun(*vo.finish())
     for k, s in enumerate(run.steps):
         if not s.ok:
             log.warning("%s: odometry failed from frame %d to %d: %s", sequence.name, k, k + 1, s.reason)
@@ -72,7 +64,7 @@ class Drift:
     scale_ratio_max: float
     step_scale_ratio_min: float  # estimated over true length of each frame-to-frame step that moved
     step_scale_ratio_max: float
-    segments: list[dict]  # per segment: from, to, translation_pct, rotation_deg_per_m, scale_ratio
+    segments: list[dict]  # per segment: from, to, length_m, translation_pct, rotation_deg_per_m, scale_ratio
 
     def summary(self) -> dict[str, float]:
         return {k: v for k, v in self.__dict__.items() if k != "segments"}
