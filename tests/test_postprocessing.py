@@ -13,7 +13,7 @@ from offroad_path.postprocessing.filter import nearest_to_bottom_centre
 
 H, W = 96, 160
 NEAR = np.full((H, W), 5.0, np.float32)  # every pixel 5 m away: the depth mask keeps all
-PAPER = PostprocessParams(max_depth_m=20.0, sigma=6.0, delta=0.025, use_depth=True)  # Holder & Breckon's D, sigma, delta
+PAPER = PostprocessParams(max_depth_m=20.0, sigma=6.0, delta=0.025, use_depth=True, unknown_depth="keep")  # Holder & Breckon's
 
 
 def test_the_default_config_holds_the_papers_values(compose_config):
@@ -31,9 +31,9 @@ def test_a_far_blob_is_removed_by_the_depth_mask():
     c[40:60, 78:82] = 0.9
     depth = np.full((H, W), 8.0, np.float32)
     depth[:45] = 35.0
-    depth[:, :5] = 0.0  # unknown depth is masked as well
+    depth[:, :5] = 0.0  # unknown depth: left alone by the paper's rule
     out = postprocess(c, depth, PAPER)
-    masked = np.where((depth > 0) & (depth <= 20), c, 0)
+    masked = np.where(depth <= 20, c, 0)
     support = blurred(masked) >= 0.025
     assert not out[:20].any()  # the far blob is gone, beyond the blur's reach
     np.testing.assert_allclose(out[support], blurred(masked)[support], atol=1e-6)
@@ -109,3 +109,16 @@ def test_nearest_pixel_to_the_bottom_centre_matches_a_brute_force_search():
             continue
         best = ((xs - w / 2) ** 2 + (ys - h) ** 2).min()
         assert (found[0] - w / 2) ** 2 + (found[1] - h) ** 2 == best
+
+
+def test_unknown_depth_is_kept_by_the_papers_rule_and_dropped_on_request():
+    c = np.zeros((H, W), np.float32)
+    c[40:, 60:100] = 0.9  # the path, 8 m away
+    depth = np.full((H, W), 8.0, np.float32)
+    depth[40:, 60:75] = 0.0  # a hole in the disparity on the left part of the path
+    kept = postprocess(c, depth, PAPER)
+    np.testing.assert_allclose(kept, postprocess(c, NEAR, PAPER), atol=1e-6)  # as if the depth were known
+    dropped = postprocess(c, depth, replace(PAPER, unknown_depth="drop"))
+    reference = blurred(np.where(depth > 0, c, 0))
+    assert dropped[70, 62] < 0.5 < kept[70, 62]  # deep inside the hole: the blurred zeros
+    np.testing.assert_allclose(dropped[70, 95], reference[70, 95], atol=1e-6)

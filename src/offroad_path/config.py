@@ -254,10 +254,11 @@ class TrainConfig:
 class PostprocessConfig:
     predictions_dir: str = MISSING  # the train stage's test-set confidence maps
     out_dir: str = MISSING
-    max_depth_m: float = setting(positive())  # D: confidence beyond this stereo depth (or of unknown depth) is set to 0
+    max_depth_m: float = setting(positive())  # D: confidence beyond this stereo depth is set to 0
     sigma: float = setting(between(0, 100, low_open=True))  # Gaussian blur, pixels of the label-sized map
     delta: float = setting(between(0, 1, high_open=True))  # confidence below this is set to 0
     use_depth: bool = MISSING
+    unknown_depth: str = setting(one_of(("keep", "drop")))  # pixels without stereo depth: keep (the paper) or zero
 
 
 @dataclass

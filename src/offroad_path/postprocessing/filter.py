@@ -1,6 +1,8 @@
 """Holder & Breckon's post-processing of a batch of path confidence maps, with OpenCV.
 
-1. C = 0 where the stereo depth exceeds D (or is unknown): the labels never reach past D.
+1. C = 0 where the stereo depth exceeds D: the labels never reach past D. Pixels of unknown depth
+   (no stereo match) keep their confidence, as in the paper (`unknown_depth=keep`); `drop` zeroes
+   them too, which costs IoU wherever the stereo matcher leaves holes on the path.
 2. Gaussian blur with sigma: smooths ragged edges and fills small holes.
 3. C = 0 where C < delta.
 4. Keep only the connected component holding the pixel with C >= delta nearest the bottom-centre
@@ -26,11 +28,12 @@ class PostprocessParams:
     sigma: float  # Gaussian blur, pixels at the map's resolution
     delta: float  # confidence below this is set to 0
     use_depth: bool  # False: skip step 1 (no stereo depth, e.g. monocular footage)
+    unknown_depth: str  # keep (the paper) or drop: what step 1 does where the depth is unknown
 
     @classmethod
     def from_config(cls, c: Any) -> PostprocessParams:
         """The settings of a `postprocess` config node (conf/postprocess/default.yaml)."""
-        return cls(c.max_depth_m, c.sigma, c.delta, c.use_depth)
+        return cls(c.max_depth_m, c.sigma, c.delta, c.use_depth, c.unknown_depth)
 
 
 def nearest_to_bottom_centre(support: np.ndarray) -> tuple[int, int] | None:
@@ -56,7 +59,10 @@ def filter_map(confidence: np.ndarray, depth: np.ndarray | None, params: Postpro
     """One (H, W) float32 map; depth (H, W) float32 metres (0 unknown), or None for no depth mask."""
     c = confidence
     if depth is not None:
-        c = np.where((depth > 0) & (depth <= params.max_depth_m), c, np.float32(0))
+        beyond = depth > params.max_depth_m
+        if params.unknown_depth == "drop":
+            beyond |= depth <= 0
+        c = np.where(beyond, np.float32(0), c)
     if params.sigma > 0:
         c = cv2.GaussianBlur(c, (0, 0), sigmaX=params.sigma, sigmaY=params.sigma, borderType=cv2.BORDER_REFLECT_101)
     support = cv2.compare(c, params.delta, cv2.CMP_GE)  # uint8 255 where C >= delta
