@@ -212,8 +212,11 @@ class WindowedOdometry:
         self._points[ids] = xyz
         self._n_points += len(xyz)
         ref.ids, ref.uv = np.concatenate([ref.ids, ids]), np.concatenate([ref.uv, corners[ok]])
-        if not self._window or self._window[-1].frame != ref.frame:
+        if not self._window or self._window[-1].frame != ref.frame:  # a fallback's landmarks make ref a keyframe
             self._window.append(_Keyframe(ref.frame, ids[:0], corners[:0], corners[:0]))
+            self._anchors.pop(ref.frame, None)  # adjusted from now on, not carried by another keyframe
+            if ref.frame > 0:
+                self._steps[ref.frame - 1].keyframe = True
         kf = self._window[-1]
         kf.ids, kf.uv_l, kf.uv_r = (
             np.concatenate([kf.ids, ids]),
