@@ -20,7 +20,7 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.labelling.labeller import check_inputs, label_sequence
-from offroad_path.odometry.windowed import FALLBACKS
+from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 from offroad_path.utils.cli import hydra_stage

@@ -17,8 +17,8 @@ from offroad_path.geometry.path import distance_along
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, encode_disparity, sgbm
 from offroad_path.labelling.footprint import Occlusion, VehicleFootprint, footprint_depth, path_mask, swept_polygons
 from offroad_path.labelling.frame_selection import select_segments
+from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
-from offroad_path.odometry.windowed import FALLBACKS
 from offroad_path.sequence.errors import SequenceError
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import Sequence

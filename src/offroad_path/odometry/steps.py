@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+FALLBACKS = ("more_features", "wide_search", "skipped_frame")  # in the order a weak step tries them
+
 
 @dataclass
 class StepResult:

@@ -28,10 +28,8 @@ import numpy as np
 
 from offroad_path.config import OdometryConfig
 from offroad_path.odometry.features import FrontEnd
-from offroad_path.odometry.steps import StepResult
+from offroad_path.odometry.steps import FALLBACKS, StepResult
 from offroad_path.sequence.calibration import StereoCalibration
-
-FALLBACKS = ("more_features", "wide_search", "skipped_frame")  # in the order a weak step tries them
 
 
 @dataclass
