@@ -17,7 +17,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from offroad_path.utils.rules import at_least, between, each, one_of, positive, rule, setting, validate
+from offroad_path.utils.rules import at_least, between, each, numbers, one_of, positive, rule, setting, validate
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 IMAGE_SIZE = between(16, 8192)  # pixels of an image side
@@ -112,6 +112,46 @@ class FootprintConfig:
     rear_m: float | None = MISSING
     camera_height_m: float | None = MISSING
     camera_pitch_deg: float | None = MISSING
+
+
+@dataclass
+class IngestTopicsConfig:
+    left: str | None = MISSING
+    right: str | None = MISSING
+    left_info: str | None = MISSING
+    right_info: str | None = MISSING
+    odometry: str | None = MISSING
+
+
+@dataclass
+class IngestVideosConfig:
+    left: str | None = MISSING
+    right: str | None = MISSING
+    offset_frames: int | None = MISSING
+    max_offset_frames: int = setting(at_least(1))
+
+
+@dataclass
+class IngestConfig:
+    """A ROS bag or two videos to a rectified sequence (offroad_path.recordings)."""
+
+    bag: str | None = MISSING
+    list_topics: bool = MISSING
+    topics: IngestTopicsConfig = field(default_factory=IngestTopicsConfig)
+    videos: IngestVideosConfig = field(default_factory=IngestVideosConfig)
+    calibration: str | None = MISSING
+    right_calibration: str | None = MISSING
+    calibration_unit_m: float = setting(positive())
+    body_to_camera: list[float] | None = setting(numbers(16))  # a 4x4 matrix, row-major
+    width: int = setting(IMAGE_SIZE)
+    height: int = setting(IMAGE_SIZE)
+    alpha: float = setting(between(0, 1))
+    fps: float | None = setting(positive())
+    sync_tolerance_s: float = setting(positive())
+    max_unpaired_fraction: float = setting(between(0, 1))
+    max_epipolar_px: float = setting(positive())
+    footprint: FootprintConfig = field(default_factory=FootprintConfig)
+    out_dir: str = MISSING
 
 
 @dataclass
@@ -341,6 +381,7 @@ class MlflowConfig:
 class Config:
     world: WorldConfig = field(default_factory=WorldConfig)
     synthesize: SynthesizeConfig = field(default_factory=SynthesizeConfig)
+    ingest: IngestConfig = field(default_factory=IngestConfig)
     label: LabelConfig = field(default_factory=LabelConfig)
     split: SplitConfig = field(default_factory=SplitConfig)
     data: DataConfig = field(default_factory=DataConfig)

@@ -56,6 +56,11 @@ def one_of(choices: Iterable[str] | Callable[[], Iterable[str]]) -> dict:
     return {"rule": Rule(lambda v: v in valid(), "")} | {"choices": valid}
 
 
+def numbers(count: int) -> dict:
+    """A list of exactly `count` finite numbers."""
+    return {"rule": Rule(lambda v: len(v) == count and all(_number(x) for x in v), f"must be a list of {count} finite numbers")}
+
+
 def each(inner: dict) -> dict:
     """The inner rule on every item of a list (choices listed as the inner rule lists them)."""
     check: Rule = inner["rule"]

@@ -1,0 +1,142 @@
+"""ROS 1 bags, ROS 2 bags (SQLite or MCAP storage) and bare MCAP files, read with `rosbags`
+(pure Python: no ROS install): stereo image topics, their CameraInfo and an odometry topic."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from offroad_path.recordings.calibration import StereoRig, camera_info_dict, rig_from_camera_infos
+from offroad_path.sequence.errors import SequenceError
+
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+# ROS encodings to OpenCV conversions to BGR (cv_bridge's table: OpenCV names Bayer by the second row).
+COLOUR = {
+    "rgb8": cv2.COLOR_RGB2BGR, "rgba8": cv2.COLOR_RGBA2BGR, "bgra8": cv2.COLOR_BGRA2BGR,
+    "bayer_rggb8": cv2.COLOR_BayerBG2BGR, "bayer_bggr8": cv2.COLOR_BayerRG2BGR,
+    "bayer_gbrg8": cv2.COLOR_BayerGR2BGR, "bayer_grbg8": cv2.COLOR_BayerGB2BGR,
+}  # fmt: skip
+CHANNELS = {"mono8": 1, "8uc1": 1, "bgr8": 3, "8uc3": 3, "rgb8": 3, "rgba8": 4, "bgra8": 4, "mono16": 1, "16uc1": 1} | {
+    k: 1 for k in COLOUR if k.startswith("bayer")
+}
+
+
+def stamp_s(msg: Any) -> float:
+    stamp = msg.header.stamp
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def info_topic_for(image_topic: str) -> str:
+    """The CameraInfo topic beside an image topic: /cam/left/image_raw(/compressed) -> /cam/left/camera_info."""
+    parts = image_topic.rstrip("/").split("/")
+    if parts[-1] in ("compressed", "theora"):
+        parts = parts[:-1]
+    return "/".join([*parts[:-1], "camera_info"])
+
+
+class Bag:
+    """An open bag; every error names the bag and the topic."""
+
+    def __init__(self, path: str | Path):
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise SequenceError(self.path, "is missing (ingest.bag)")
+        self._reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        try:
+            self._reader.open()
+        except Exception as e:  # rosbags raises its own error types for every malformed bag
+            raise SequenceError(self.path, f"cannot be read as a ROS 1, ROS 2 or MCAP bag ({type(e).__name__}: {e})") from e
+
+    def __enter__(self) -> Bag:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        with contextlib.suppress(Exception):
+            self._reader.close()
+
+    def topics(self) -> dict[str, tuple[str, int]]:
+        """{topic: (message type, message count)}."""
+        return {name: (info.msgtype, info.msgcount) for name, info in sorted(self._reader.topics.items())}
+
+    def connections(self, topic: str, types: tuple[str, ...], role: str) -> list:
+        found = [c for c in self._reader.connections if c.topic == topic]
+        if not found:
+            listing = ", ".join(f"{t} ({m})" for t, (m, _) in self.topics().items())
+            raise SequenceError(self.path, f"has no topic {topic} ({role}); its topics: {listing}")
+        if found[0].msgtype not in types:
+            raise SequenceError(self.path, f"topic {topic} ({role}) carries {found[0].msgtype}, expected {' or '.join(types)}")
+        return found
+
+    def first(self, topic: str, types: tuple[str, ...], role: str) -> Any:
+        for connection, _, raw in self._reader.messages(connections=self.connections(topic, types, role)):
+            return self._reader.deserialize(raw, connection.msgtype)
+        raise SequenceError(self.path, f"topic {topic} ({role}) has no messages")
+
+    def rig(self, left_info: str, right_info: str) -> StereoRig:
+        infos = [
+            camera_info_dict(self.first(topic, (INFO_TYPE,), f"{side} CameraInfo"))
+            for side, topic in (("left", left_info), ("right", right_info))
+        ]
+        return rig_from_camera_infos(*infos, self.path)
+
+    def stereo_messages(self, left: str, right: str) -> Iterator[tuple[str, float, Any]]:
+        """("left" | "right", header stamp, message) in recording order; images are decoded later."""
+        side = {}
+        for name, topic in (("left", left), ("right", right)):
+            for connection in self.connections(topic, IMAGE_TYPES, f"{name} images"):
+                side[connection.id] = name
+        connections = [c for c in self._reader.connections if c.id in side]
+        for connection, _, raw in self._reader.messages(connections=connections):
+            msg = self._reader.deserialize(raw, connection.msgtype)
+            yield side[connection.id], stamp_s(msg), msg
+
+    def poses(self, topic: str) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) header stamps and (N, 4, 4) poses of an odometry or pose topic."""
+        times, poses = [], []
+        for connection, _, raw in self._reader.messages(connections=self.connections(topic, POSE_TYPES, "odometry")):
+            msg = self._reader.deserialize(raw, connection.msgtype)
+            pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+            q, p = pose.orientation, pose.position
+            T = np.eye(4)
+            T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+            T[:3, 3] = (p.x, p.y, p.z)
+            times.append(stamp_s(msg))
+            poses.append(T)
+        return np.asarray(times), np.asarray(poses).reshape(-1, 4, 4)
+
+
+def decode_image(msg: Any, topic: str, source: Path) -> np.ndarray:
+    """A sensor_msgs Image or CompressedImage as uint8 BGR (H, W, 3) or grey (H, W)."""
+    if hasattr(msg, "format"):  # CompressedImage: JPEG or PNG bytes
+        image = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise SequenceError(source, f"{topic}: a compressed image ({msg.format!r}) at {stamp_s(msg):.6f} s cannot be decoded")
+        if image.ndim == 3 and image.shape[2] == 4:
+            image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+        return (image >> 8).astype(np.uint8) if image.dtype == np.uint16 else image
+    encoding = msg.encoding.lower()
+    if encoding not in CHANNELS:
+        raise SequenceError(source, f"{topic}: image encoding {msg.encoding!r} is not supported ({', '.join(sorted(CHANNELS))})")
+    wide = encoding in ("mono16", "16uc1")
+    row_bytes = msg.width * CHANNELS[encoding] * (2 if wide else 1)
+    if msg.step < row_bytes or len(msg.data) < msg.step * msg.height:
+        raise SequenceError(
+            source, f"{topic}: a {msg.width}x{msg.height} {encoding} image has {len(msg.data)} bytes (step {msg.step}); it is truncated"
+        )
+    rows = np.asarray(msg.data, np.uint8)[: msg.step * msg.height].reshape(msg.height, msg.step)[:, :row_bytes]
+    if wide:
+        image = rows.copy().view(">u2" if msg.is_bigendian else "<u2").reshape(msg.height, msg.width)
+        return (image >> 8).astype(np.uint8)
+    image = rows.reshape(msg.height, msg.width, CHANNELS[encoding]) if CHANNELS[encoding] > 1 else rows
+    return cv2.cvtColor(image, COLOUR[encoding]) if encoding in COLOUR else np.ascontiguousarray(image)

@@ -1,0 +1,170 @@
+"""Where raw stereo frames come from: a ROS bag or two video files. Both are checked when opened
+(topics, calibration, frame size, offset), before anything is written, and both give the same
+thing: a rig calibration, the raw frame size and time-stamped raw pairs."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+from omegaconf import DictConfig
+
+from offroad_path.recordings.bags import IMAGE_TYPES, POSE_TYPES, Bag, decode_image, info_topic_for
+from offroad_path.recordings.calibration import StereoRig, read_rig
+from offroad_path.recordings.sync import SyncStats, check_pairing, pair_by_stamp, poses_at
+from offroad_path.recordings.video import estimate_offset, frames, motion_signal, probe
+from offroad_path.sequence.errors import SequenceError
+
+log = logging.getLogger(__name__)
+Frames = Iterator[tuple[float, np.ndarray, np.ndarray]]  # (seconds, raw left, raw right), BGR or grey
+# A ROS body frame (x forward, y left, z up; REP 103) to a camera's optical frame (x right, y down, z forward).
+ROS_BODY_TO_OPTICAL = np.array([[0, 0, 1, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 1]], np.float64)
+
+
+def _same_size(left: np.ndarray, right: np.ndarray, source: Path) -> tuple[int, int]:
+    if left.shape[:2] != right.shape[:2]:
+        raise SequenceError(
+            source,
+            f"left frames are {left.shape[1]}x{left.shape[0]}, right frames {right.shape[1]}x{right.shape[0]}: "
+            "a stereo pair needs one size",
+        )
+    return left.shape[1], left.shape[0]
+
+
+def _file_rig(c: DictConfig) -> StereoRig | None:
+    return read_rig(c.calibration, c.right_calibration, c.calibration_unit_m) if c.calibration else None
+
+
+class BagSource:
+    def __init__(self, c: DictConfig):
+        self.c = c
+        self.bag = Bag(c.bag)
+        self.path = self.bag.path
+        self.inputs = [self.path]
+        rig = _file_rig(c)
+        self.names = {}
+        for i, side in enumerate(("left", "right")):
+            topic = c.topics[side] or (rig.rostopics[i] if rig else None)
+            if topic is None:
+                images = [t for t, (m, _) in self.bag.topics().items() if m in IMAGE_TYPES]
+                raise ValueError(f"ingest.topics.{side} is required: the image topics of {self.path} are {', '.join(images) or 'none'}")
+            self.names[side] = topic
+        if rig is None:
+            infos = [c.topics[f"{side}_info"] or info_topic_for(self.names[side]) for side in ("left", "right")]
+            rig = self.bag.rig(*infos)
+        self.rig = rig
+        first = [decode_image(self.bag.first(t, IMAGE_TYPES, f"{s} images"), t, self.path) for s, t in self.names.items()]
+        self.input_size = _same_size(*first, self.path)
+        if c.topics.odometry:
+            self.bag.connections(c.topics.odometry, POSE_TYPES, "odometry")
+        self.stats = SyncStats()
+
+    def pairs(self, keep: Callable[[float], bool]) -> Frames:
+        """The synchronised pairs; only the kept ones are decoded."""
+        messages = self.bag.stereo_messages(self.names["left"], self.names["right"])
+        for t, left, right in pair_by_stamp(messages, self.c.sync_tolerance_s, self.stats, self.names, self.path):
+            if keep(t):
+                yield t, decode_image(left, self.names["left"], self.path), decode_image(right, self.names["right"], self.path)
+        check_pairing(self.stats, self.c.max_unpaired_fraction, self.c.sync_tolerance_s, self.names, self.path)
+
+    def camera_poses(self, times: np.ndarray) -> np.ndarray | None:
+        """(N, 4, 4) raw left camera to world at `times`, from the odometry topic; None without one."""
+        topic = self.c.topics.odometry
+        if not topic:
+            return None
+        body_to_camera = (
+            ROS_BODY_TO_OPTICAL if self.c.body_to_camera is None else np.asarray(self.c.body_to_camera, np.float64).reshape(4, 4)
+        )
+        stamps, poses = self.bag.poses(topic)
+        return poses_at(stamps, poses, times, self.path, topic) @ body_to_camera
+
+    def describe(self) -> dict:
+        return {
+            "source": self.path.name,
+            "topics": self.names | ({"odometry": self.c.topics.odometry} if self.c.topics.odometry else {}),
+            "sync": {"left_messages": self.stats.left, "right_messages": self.stats.right, "pairs": self.stats.pairs,
+                     "unpaired": self.stats.unpaired, "worst_gap_ms": round(self.stats.worst_gap_s * 1000, 3)},
+        }  # fmt: skip
+
+    def close(self) -> None:
+        self.bag.__exit__()
+
+
+class VideoSource:
+    def __init__(self, c: DictConfig):
+        self.c = c
+        videos = [probe(Path(p)) for p in (c.videos.left, c.videos.right)]
+        self.left, self.right = videos
+        self.path = self.right.path
+        self.inputs = [v.path for v in videos]
+        if abs(self.left.fps - self.right.fps) > 0.01 * self.left.fps:
+            raise SequenceError(
+                self.path, f"runs at {self.right.fps:g} fps, {self.left.path.name} at {self.left.fps:g}: record both at one frame rate"
+            )
+        if self.left.size != self.right.size:
+            raise SequenceError(
+                self.path, f"is {self.right.size[0]}x{self.right.size[1]}, {self.left.path.name} {self.left.size[0]}x{self.left.size[1]}"
+            )
+        self.input_size = self.left.size
+        self.rig = _file_rig(c)
+        if self.rig is None:
+            raise ValueError(
+                "ingest.calibration is required for two videos: an OpenCV, Kalibr or ROS stereo calibration "
+                "(python -m offroad_path.calibrate makes one)"
+            )
+        self.offset = c.videos.offset_frames
+        self.correlation = None
+        if self.offset is None:
+            self.offset, self.correlation = self._estimate_offset()
+        self.pairs_seen = 0
+
+    def _estimate_offset(self) -> tuple[int, float]:
+        limit = self.c.videos.max_offset_frames
+        length = max(20 * limit, 600)  # frames read for the signals
+        signals = [motion_signal(v.path, length) for v in (self.left, self.right)]
+        offset = estimate_offset(*signals, limit)
+        if offset is None or offset.correlation < 0.5:
+            found = f"the best correlation is {offset.correlation:.2f} at {offset.frames} frames" if offset else "the videos are too short"
+            raise SequenceError(
+                self.path, f"its time offset to {self.left.path.name} cannot be estimated ({found}); give ingest.videos.offset_frames"
+            )
+        if offset.runner_up > 0.95 * offset.correlation:
+            log.warning(
+                "%s: the time offset %d frames is ambiguous (correlation %.3f, another offset %.3f); "
+                "check preview.jpg or give ingest.videos.offset_frames",
+                self.path, offset.frames, offset.correlation, offset.runner_up,
+            )  # fmt: skip
+        log.info("video offset: right frame = left frame %+d (motion correlation %.3f)", offset.frames, offset.correlation)
+        return offset.frames, offset.correlation
+
+    def pairs(self, keep: Callable[[float], bool]) -> Frames:
+        left_start, right_start = max(0, -self.offset), max(0, self.offset)
+        for k, (left, right) in enumerate(zip(frames(self.left.path, left_start), frames(self.right.path, right_start), strict=False)):
+            self.pairs_seen += 1
+            t = (left_start + k) / self.left.fps  # on the left video's clock
+            if keep(t):
+                yield t, left, right
+
+    def camera_poses(self, times: np.ndarray) -> None:
+        return None
+
+    def describe(self) -> dict:
+        return {
+            "source": [self.left.path.name, self.right.path.name],
+            "video": {"fps": self.left.fps, "offset_frames": self.offset, "offset_correlation": self.correlation, "pairs": self.pairs_seen},
+        }
+
+    def close(self) -> None:
+        pass
+
+
+def open_source(c: DictConfig) -> BagSource | VideoSource:
+    """The source ingest.bag or ingest.videos names (exactly one)."""
+    has_videos = c.videos.left is not None or c.videos.right is not None
+    if (c.bag is None) == (not has_videos):
+        raise ValueError("give either ingest.bag=PATH or ingest.videos.left=PATH ingest.videos.right=PATH (exactly one source)")
+    if has_videos and (c.videos.left is None or c.videos.right is None):
+        raise ValueError("ingest.videos needs both left and right")
+    return BagSource(c) if c.bag is not None else VideoSource(c)
