@@ -150,7 +150,7 @@ def write_bag(path: Path, kind: str, frames: list, rig: RawRig, *, compressed: t
                 messages.append(
                     (t + delay + 0.001, f"/stereo/{side}/camera_info", ros.camera_info(t + delay, camera_infos[side == "right"], side))
                 )
-        if poses is not None:
+        if poses is not None and i < len(poses):
             messages.append((t, "/odom", ros.odometry(t, poses[i])))
     storage = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
     with Writer1(path) if ros.ros1 else Writer2(path, version=9, storage_plugin=storage) as writer:
