@@ -42,7 +42,7 @@ class Rectifier:
             )
             undistort = cv2.initUndistortRectifyMap
         self.maps = [undistort(cam.K, cam.D, Ri, Pi, output_size, cv2.CV_16SC2) for cam, Ri, Pi in ((left, R1, P1), (right, R2, P2))]
-        self.R_left = R1  # (3, 3): a point in the raw left camera, in the rectified left camera
+        self.R_left, self.R_right = R1, R2  # (3, 3): a point in the raw camera, in the rectified camera
         self.calibration = StereoCalibration(P1, P2)
         self.output_size = output_size
 
