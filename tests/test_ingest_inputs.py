@@ -196,3 +196,40 @@ def test_offset_from_motion_signals():
     motion = rng.random(200)
     found = estimate_offset(motion[5:105], motion[:100], max_offset=10)  # the right video started 5 frames early
     assert found.frames == 5 and found.correlation == pytest.approx(1.0) and found.runner_up < 0.5
+
+
+def test_fisheye_rig_from_kalibr_is_rectified(tmp_path):
+    """An equidistant (fisheye) rig: points seen through it land on one row in both rectified
+    images, and the rectification maps send each rectified pixel back to its raw pixel."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    from offroad_path.recordings.rectify import Rectifier
+
+    size, K = (640, 480), np.array([[280.0, 0, 321], [0, 281, 238], [0, 0, 1]])
+    D = np.array([0.05, -0.01, 0.002, -0.0005])
+    R = Rotation.from_euler("xyz", [0.3, -0.8, 0.2], degrees=True).as_matrix()
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, -R @ [0.12, 0.0, 0.0]
+    cams = {f"cam{i}": {"camera_model": "pinhole", "intrinsics": K[[0, 1, 0, 1], [0, 1, 2, 2]].tolist(), "distortion_model": "equidistant",
+                        "distortion_coeffs": D.tolist(), "resolution": list(size)} for i in range(2)}  # fmt: skip
+    cams["cam1"]["T_cn_cnm1"] = T.tolist()
+    (tmp_path / "camchain.yaml").write_text(yaml.safe_dump(cams))
+    rig = read_rig(tmp_path / "camchain.yaml")
+    assert rig.left.fisheye and rig.right.fisheye
+    rectifier = Rectifier(rig, size, (512, 384), 0.0)
+    points = np.random.default_rng(0).uniform([-4, -1.5, 3], [4, 1.5, 20], (300, 3)).reshape(-1, 1, 3)
+    rows, rectified = [], []
+    for r, t, R_i, P in ((np.eye(3), np.zeros(3), rectifier.R_left, rectifier.calibration.P_left),
+                         (R, T[:3, 3], rectifier.R_right, rectifier.calibration.P_right)):  # fmt: skip
+        raw, _ = cv2.fisheye.projectPoints(points, cv2.Rodrigues(r)[0], t, K, D)
+        rect = cv2.fisheye.undistortPoints(raw, K, D, R=R_i, P=P).reshape(-1, 2)
+        rows.append(rect[:, 1])
+        rectified.append((raw.reshape(-1, 2), rect))
+    assert np.abs(rows[0] - rows[1]).max() < 0.01
+    map_x, map_y = cv2.convertMaps(*rectifier.maps[0], cv2.CV_32FC1)
+    raw, rect = rectified[0]
+    inside = (rect[:, 0] >= 0) & (rect[:, 0] < 511) & (rect[:, 1] >= 0) & (rect[:, 1] < 383)
+    u, v = np.rint(rect[inside]).astype(int).T
+    looked_up = np.stack([map_x[v, u], map_y[v, u]], axis=1)
+    assert inside.sum() > 100 and np.abs(looked_up - raw[inside]).max() < 1.5  # rounding to a pixel moves the raw point by < 1.5 px
