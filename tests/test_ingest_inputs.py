@@ -75,6 +75,8 @@ def test_videos_need_a_calibration_and_a_detectable_offset(compose_config, rig, 
     left, right = write_videos(tmp_path, frames, fps=5.0, right_offset=0)
     videos = [f"ingest.videos.left={left}", f"ingest.videos.right={right}", f"ingest.out_dir={tmp_path / 'out'}"]
     refused(ingest, compose_config(*videos), capsys, tmp_path, "ingest.calibration is required for two videos")
+    missing = [f"ingest.videos.left={left}", f"ingest.videos.right={tmp_path / 'nope.mp4'}", f"ingest.out_dir={tmp_path / 'out'}"]
+    refused(ingest, compose_config(*missing), capsys, tmp_path, str(tmp_path / "nope.mp4"), "is missing")
     calibration = tmp_path / "stereo.yaml"
     write_opencv(
         calibration, StereoRig(*[CameraModel(K, D, rig.size) for K, D in zip(rig.K, rig.D, strict=True)], rig.R, rig.T, calibration)
