@@ -21,8 +21,10 @@ SHIFT_PX = 24
 
 
 def stage_config(compose_config, split_dir: Path, root: Path, *overrides: str):
+    labels_dir = Path(read_manifest(split_dir / "test.csv")[0].label).parents[2]  # <labels>/<sequence>/label/NNNNNN.png
     return compose_config(
-        f"split.out_dir={split_dir}", f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
+        f"split.out_dir={split_dir}", f"split.labels_dir={labels_dir}", f"steering.out_dir={root / 'steering'}",
+        f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
         f"evaluate.out_dir={root / 'evaluation'}", f"evaluate.metrics_path={root / 'metrics.json'}",
         f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}", *overrides,
     )  # fmt: skip
@@ -44,8 +46,26 @@ def scored(compose_config, split_dir, tmp_path):
         model, pretraining = run.split("-")
         run_postprocess(stage_config(compose_config, split_dir, tmp_path, f"model={model}", f"pretraining={pretraining}",
                                      f"postprocess.predictions_dir={out}", f"postprocess.out_dir={tmp_path / 'post' / run}"))  # fmt: skip
+    write_pilotnet_predictions(samples, tmp_path / "steering" / "predictions.csv")
     rows = evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]"))
     return rows, labels.astype(bool), made
+
+
+def true_steering(samples) -> np.ndarray:
+    sequences = {}
+    for s in samples:  # the label run's sequence folder names its source in summary.json
+        if s.sequence not in sequences:
+            summary = json.loads((Path(s.label).parents[2] / "summary.json").read_text())
+            root = next(e["root"] for e in summary["sequences"] if e["name"] == s.sequence)
+            sequences[s.sequence] = np.loadtxt(Path(root) / "steering.txt")
+    return np.array([sequences[s.sequence][s.f0] * (-1 if s.mirrored else 1) for s in samples])
+
+
+def write_pilotnet_predictions(samples, path: Path) -> None:
+    """What train_steering writes, for a PilotNet whose every answer is 0.1 too far right."""
+    path.parent.mkdir(parents=True)
+    rows = [f"{s.sequence},{s.f0},{s.mirrored},{t:.6f},{t + 0.1:.6f}\n" for s, t in zip(samples, true_steering(samples), strict=True)]
+    path.write_text("sequence,frame,mirrored,true,predicted\n" + "".join(rows))
 
 
 def test_scores_match_the_known_predictions(scored):
@@ -64,7 +84,7 @@ def test_scores_match_the_known_predictions(scored):
 
 def test_outputs_follow_the_contract(scored, tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert set(metrics) == {"unet-none", "fcn-none", "baselines"} and metrics["unet-none"]["raw"]["iou"] == 1.0
+    assert set(metrics) == {"unet-none", "fcn-none", "baselines", "steering_from_paths"} and metrics["unet-none"]["raw"]["iou"] == 1.0
     assert set(metrics["baselines"]) == {"non_corresponding.unet-none", "non_corresponding.fcn-none", "mean_path_prior"}
     assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 | 1.000 |" in (tmp_path / "evaluation" / "results.md").read_text()
     assert len((tmp_path / "evaluation" / "results.csv").read_text().splitlines()) == 5
@@ -80,6 +100,20 @@ def test_outputs_follow_the_contract(scored, tmp_path):
     with sqlite3.connect(tmp_path / "mlflow.db") as db:
         (value,) = db.execute("select value from metrics where key = 'unet-none.raw.iou'").fetchone()
     assert value == 1.0
+
+
+def test_steering_from_paths_against_pilotnet(scored, split_dir, tmp_path):
+    steering = json.loads((tmp_path / "metrics.json").read_text())["steering_from_paths"]
+    assert list(steering) == ["straight_ahead", "pilotnet", "label_ceiling", "unet-none", "fcn-none"]
+    true = true_steering(read_manifest(split_dir / "test.csv"))
+    assert steering["straight_ahead"]["mae"] == pytest.approx(np.abs(true).mean(), abs=1e-6)
+    assert steering["pilotnet"]["mae"] == pytest.approx(0.1, abs=1e-5)
+    assert steering["pilotnet"]["mae_road_wheel_deg"] == pytest.approx(3.0, abs=1e-4)  # 0.1 of the 30-degree lock
+    assert steering["pilotnet"]["mae_steering_wheel_deg"] == pytest.approx(45.0, abs=1e-3)  # at a steering ratio of 15
+    assert steering["unet-none"] == steering["label_ceiling"]  # its maps are the labels
+    assert steering["label_ceiling"]["mae"] < steering["straight_ahead"]["mae"]
+    table = (tmp_path / "evaluation" / "results.md").read_text().split("## Path prediction against end-to-end steering")[1]
+    assert "| PilotNet (end to end) |" in table and "| U-Net (none) + pure pursuit |" in table
 
 
 def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path):

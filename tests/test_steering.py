@@ -33,8 +33,12 @@ def test_pilotnet_parameters_and_output():
 def test_scores_on_hand_made_angles():
     true = np.array([0.0, 0.05, -0.3, 0.8])
     predicted = np.array([0.1, 0.05, -0.1, 0.4])
-    m = steering_metrics(true, predicted)
+    m = steering_metrics(true, predicted, lock_deg=36.0, steering_ratio=15.0)
     assert m["mean_absolute_error"] == pytest.approx((0.1 + 0 + 0.2 + 0.4) / 4)
+    # the paper's reading: 0.175 of a 36-degree lock is 6.3 degrees at the road wheels, 94.5 at the steering wheel
+    assert m["mean_absolute_error_road_wheel_deg"] == pytest.approx(6.3) and m["mean_absolute_error_steering_wheel_deg"] == pytest.approx(
+        94.5
+    )
     assert m["largest_predicted_magnitude"] == pytest.approx(0.4) and m["straight_ahead_mean_absolute_error"] == pytest.approx(1.15 / 4)
     bins = {b["true_magnitude"]: b for b in error_by_magnitude(true, predicted)}
     assert bins["0.0-0.1"]["frames"] == 2 and bins["0.0-0.1"]["mean_absolute_error"] == pytest.approx(0.05)

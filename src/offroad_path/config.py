@@ -302,12 +302,21 @@ class PostprocessConfig:
 
 
 @dataclass
+class SteeringFromPathsConfig:
+    lookahead_m: float = setting(positive())  # pure pursuit's look-ahead distance from the rear axle
+    steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree
+    pilotnet_predictions: str | None = MISSING  # train_steering's predictions.csv; None: no PilotNet row
+
+
+@dataclass
 class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
     runs: list[str] = MISSING  # <architecture>-<pretraining>; conf/ takes the grid of the two lists
     runs_dir: str = MISSING  # <run>/predictions from train
     postprocessed_dir: str = MISSING  # <run>/ from postprocess
+    labels_dir: str = MISSING  # the label run: steering, calibration and vehicle of each test frame
+    steering_from_paths: SteeringFromPathsConfig = field(default_factory=SteeringFromPathsConfig)
     train_manifest: str = MISSING  # for the mean-path prior
     threshold: float = setting(between(0, 1))  # path where C > threshold
     pr_thresholds: int = setting(at_least(2))
@@ -338,6 +347,8 @@ class SteeringConfig:
     mirror: bool = MISSING  # add mirrored copies with negated steering
     jitter: float = MISSING  # photometric augmentation (no geometric: it would change the steering)
     seed: int = MISSING
+    lock_deg: float = setting(positive())  # road-wheel angle of normalised steering 1, for errors in degrees
+    steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree
     metrics_path: str = MISSING
     plots_path: str = MISSING  # true and predicted steering per test frame
 

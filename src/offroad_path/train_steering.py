@@ -75,7 +75,7 @@ def train_steering(cfg: DictConfig) -> dict:
             writer.writeheader()
             writer.writerows(bins)
         scatter_plot(true, predicted, tmp / "scatter.png")
-        return {**steering_metrics(true, predicted), "by_true_magnitude": bins}
+        return {**steering_metrics(true, predicted, s.lock_deg, s.steering_ratio), "by_true_magnitude": bins}
 
     tags = {"stage": "train_steering", "model": "pilotnet"}
     logger = training_logger(cfg, "train_steering pilotnet", tags, {"steering": OmegaConf.to_container(s, resolve=True)})
@@ -88,9 +88,12 @@ def train_steering(cfg: DictConfig) -> dict:
         logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
         for name in ("scatter.png", "error_by_magnitude.csv"):
             logger.experiment.log_artifact(logger.run_id, str(Path(s.out_dir) / name))
-    log.info("PilotNet: test mean absolute error %.4f (straight ahead would score %.4f), largest predicted magnitude %.3f of true %.3f",
-             metrics["mean_absolute_error"], metrics["straight_ahead_mean_absolute_error"], metrics["largest_predicted_magnitude"],
-             metrics["largest_true_magnitude"])  # fmt: skip
+    log.info(
+        "PilotNet: test mean absolute error %.4f (%.1f degrees at the steering wheel; straight ahead would score %.4f), "
+        "largest predicted magnitude %.3f of true %.3f",
+        metrics["mean_absolute_error"], metrics["mean_absolute_error_steering_wheel_deg"], metrics["straight_ahead_mean_absolute_error"],
+        metrics["largest_predicted_magnitude"], metrics["largest_true_magnitude"],
+    )  # fmt: skip
     return metrics
 
 

@@ -15,6 +15,7 @@ from offroad_path.data.dataset import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases, save_png
 from offroad_path.evaluation.metrics import Scores, counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
+from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, csv_text, markdown_table, network_name, split_run_name
 from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 
@@ -31,6 +32,7 @@ class Report:
     paths: dict[tuple[str, str], list[str]] = field(default_factory=dict)  # the maps behind each row
     curves: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # run -> precision-recall curve
     baselines: dict[str, Scores] = field(default_factory=dict)  # "non_corresponding.<run>", "mean_path_prior"
+    steering: SteeringComparison | None = None  # steering from the paths against PilotNet
 
     def table(self) -> list[ResultRow]:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
@@ -45,6 +47,8 @@ class Report:
         """For metrics.json and MLflow: numbers only (rounded), None for undefined (JSON has no nan)."""
         out: dict = {run: {"raw": _numbers(self.rows[run, "no"]), "postprocessed": _numbers(self.rows[run, "yes"])} for run in self.runs}
         out["baselines"] = {name: _numbers(s) for name, s in self.baselines.items()}
+        if self.steering is not None and self.steering.rows:
+            out["steering_from_paths"] = {key: _numbers(row) for key, row in self.steering.rows.items()}
         return out
 
 
@@ -63,7 +67,7 @@ def baseline(predicted: np.ndarray, labels: np.ndarray, samples: list[Sample]) -
 
 def score_runs(e: DictConfig) -> Report:
     """Score each run's raw (train) and post-processed maps against the test labels, with the baselines."""
-    report = Report(list(e.runs))
+    report = Report(list(e.runs), steering=SteeringComparison(e))
     labels = np.zeros(0)
     for run in report.runs:
         model, pretraining = split_run_name(run)
@@ -75,6 +79,7 @@ def score_runs(e: DictConfig) -> Report:
             report.samples, report.paths[run, pp] = [s for s, _ in rows], [p for _, p in rows]
             if not len(labels):
                 labels = load_labels(report.samples)
+                report.steering.start(report.samples, labels)
             maps = load_maps(report.paths[run, pp])
             per_image = counts(maps, labels, e.threshold)
             ious, s = per_image_iou(per_image), pooled(per_image)
@@ -85,6 +90,7 @@ def score_runs(e: DictConfig) -> Report:
             if pp == "no":
                 report.curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
                 report.baselines[f"non_corresponding.{run}"] = baseline(maps > e.threshold, labels, report.samples)
+                report.steering.add(run, f"{network_name(model)} ({pretraining}) + pure pursuit", maps > e.threshold)
         log.info("%s: IoU %.3f, post-processed %.3f", run, report.rows[run, "no"].iou, report.rows[run, "yes"].iou)
     prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
     everywhere = np.broadcast_to(prior, labels.shape).astype(np.float32)
@@ -112,6 +118,7 @@ def write_report(e: DictConfig, report: Report) -> None:
             "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(table) +
             "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
             "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(report.baseline_rows())
+            + steering_section(e, report)
         )  # fmt: skip
         (tmp / "results.csv").write_text(csv_text(table))
         save_png(tmp / "figures" / "good_and_bad_cases.png", cases_figure(report, e.figure_cases, e.figure_scale))
@@ -121,6 +128,20 @@ def write_report(e: DictConfig, report: Report) -> None:
             lines = ["threshold,precision,recall"] + [f"{t:.4f},{p:.6f},{r:.6f}" for t, p, r in zip(*curve.values(), strict=True)]
             (tmp / f"{run}.csv").write_text("\n".join(lines) + "\n")
     write_text_atomic(e.metrics_path, json.dumps(report.metrics(), indent=2) + "\n")
+
+
+def steering_section(e: DictConfig, report: Report) -> str:
+    """The path-against-steering table for results.md (empty without steering ground truth)."""
+    if report.steering is None or not report.steering.rows:
+        return ""
+    s = e.steering_from_paths
+    return (
+        "\n## Path prediction against end-to-end steering\n\nOn the same test frames: a steering angle from each "
+        f"network's thresholded path (its centre line on the ground, pure pursuit at {s.lookahead_m:g} m look-ahead), "
+        "from the ground-truth path label, and PilotNet's. Degrees at the road wheels are the normalised error times the "
+        f"vehicle's steering lock; at the steering wheel, times the steering ratio {s.steering_ratio:g}.\n\n"
+        + markdown_table(report.steering.table())
+    )
 
 
 def cases_figure(report: Report, cases: int, scale: float) -> np.ndarray:

@@ -12,11 +12,15 @@ import numpy as np
 MAGNITUDE_EDGES = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 1.0)
 
 
-def steering_metrics(true: np.ndarray, predicted: np.ndarray) -> dict:
+def steering_metrics(true: np.ndarray, predicted: np.ndarray, lock_deg: float, steering_ratio: float) -> dict:
+    """Errors of normalised steering, and in degrees: at the road wheels (times the lock) and at the
+    steering wheel (times the steering ratio too), the paper's reading of its 0.097."""
     error = np.abs(predicted - true)
     return {
         "test_frames": len(true),
         "mean_absolute_error": float(error.mean()),
+        "mean_absolute_error_road_wheel_deg": float(error.mean() * lock_deg),
+        "mean_absolute_error_steering_wheel_deg": float(error.mean() * lock_deg * steering_ratio),
         "largest_predicted_magnitude": float(np.abs(predicted).max()),
         "largest_true_magnitude": float(np.abs(true).max()),
         # what always predicting straight ahead would score: the bias the thesis saw
