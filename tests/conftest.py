@@ -38,6 +38,22 @@ def drive(compose_config, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def rig(drive):
+    """A raw stereo rig that recorded `drive` (tests/raw_rig.py): own K and distortion per camera, the right one turned."""
+    from raw_rig import raw_rig
+
+    return raw_rig(drive / "drive")
+
+
+@pytest.fixture(scope="session")
+def raw_drive(drive, rig) -> list:
+    """`drive`'s frames as the raw rig saw them: (left, right) BGR per frame."""
+    from raw_rig import raw_frames
+
+    return raw_frames(drive / "drive", rig)
+
+
+@pytest.fixture(scope="session")
 def labelled_drive(compose_config, drive, tmp_path_factory) -> Path:
     """The label stage's output for `drive` (VO poses), made once per session."""
     from offroad_path.label import label

@@ -10,7 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from raw_rig import body_poses, raw_frames, raw_rig, write_bag, write_videos
+from raw_rig import body_poses, write_bag, write_videos
 
 from offroad_path.ingest import ingest
 from offroad_path.label import label
@@ -22,13 +22,8 @@ LEFT, RIGHT = "/stereo/left/image_raw", "/stereo/right/image_raw"
 
 
 @pytest.fixture(scope="module")
-def rig(drive):
-    return raw_rig(drive / "drive")
-
-
-@pytest.fixture(scope="module")
-def frames(drive, rig):
-    return raw_frames(drive / "drive", rig)
+def frames(raw_drive):
+    return raw_drive
 
 
 @pytest.fixture(scope="module")

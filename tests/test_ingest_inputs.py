@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 from helpers import refused
-from raw_rig import RosMessages, body_poses, raw_frames, raw_rig, write_bag, write_videos
+from raw_rig import RosMessages, body_poses, write_bag, write_videos
 
 from offroad_path.ingest import ingest
 from offroad_path.recordings.bags import decode_image, info_topic_for
@@ -23,13 +23,8 @@ LEFT, RIGHT = "/stereo/left/image_raw", "/stereo/right/image_raw"
 
 
 @pytest.fixture(scope="module")
-def rig(drive):
-    return raw_rig(drive / "drive")
-
-
-@pytest.fixture(scope="module")
-def frames(drive, rig):
-    return raw_frames(drive / "drive", rig)[:12]
+def frames(raw_drive):
+    return raw_drive[:12]
 
 
 def bag_config(compose_config, bag: Path, out: Path, *overrides: str):

@@ -43,6 +43,15 @@ class BagSource:
         self.bag = Bag(c.bag)
         self.path = self.bag.path
         self.inputs = [self.path]
+        self.stats = SyncStats()
+        try:
+            self._check(c)
+        except BaseException:
+            self.close()
+            raise
+
+    def _check(self, c: DictConfig) -> None:
+        """Topics, calibration and frame size, before anything is written."""
         rig = _file_rig(c)
         self.names = {}
         for i, side in enumerate(("left", "right")):
@@ -59,7 +68,6 @@ class BagSource:
         self.input_size = _same_size(*first, self.path)
         if c.topics.odometry:
             self.bag.connections(c.topics.odometry, POSE_TYPES, "odometry")
-        self.stats = SyncStats()
 
     def pairs(self, keep: Callable[[float], bool]) -> Frames:
         """The synchronised pairs; only the kept ones are decoded."""
