@@ -59,9 +59,11 @@ def baseline_name(key: str) -> str:
     return {"mean_path_prior": "mean path prior (average training label)"}.get(key, key)
 
 
-def fmt(x: float | str) -> str:
+def fmt(x: float | int | str) -> str:
     if isinstance(x, str):
         return x
+    if isinstance(x, int):
+        return str(x)
     return "n/a" if math.isnan(x) else f"{x:.3f}"
 
 
