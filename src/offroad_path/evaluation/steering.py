@@ -106,7 +106,8 @@ class SteeringComparison:
         if self.geometry is None:
             return
         self.rows["straight_ahead"] = self._row("always straight ahead", np.zeros(len(samples)))
-        pilotnet = pilotnet_predictions(Path(self.e.steering_from_paths.pilotnet_predictions), samples)
+        predictions = self.e.steering_from_paths.pilotnet_predictions  # null: no PilotNet row
+        pilotnet = pilotnet_predictions(Path(predictions), samples) if predictions else None
         if pilotnet is not None:
             self.rows["pilotnet"] = self._row("PilotNet (end to end)", pilotnet)
         self.rows["label_ceiling"] = self._pursued("ground-truth path label + pure pursuit (the ceiling)", labels)
