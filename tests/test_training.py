@@ -157,8 +157,29 @@ def test_imagenet_errors_name_the_file(tmp_path):
     (tmp_path / "junk.pth").write_bytes(b"not a checkpoint")
     with pytest.raises(ValueError, match=r"junk\.pth: not a PyTorch state dict"):
         from_imagenet_vgg(build_model("fcn", 2, 0.125), tmp_path / "junk.pth")
-    with pytest.raises(ValueError, match="not this model"):
-        from_imagenet_vgg(build_model("unet", 2, 0.125), tmp_path / "vgg16.pth")
+    state = torch.load(tmp_path / "vgg16.pth")
+    torch.save({k: v for k, v in state.items() if not k.startswith("features.28.")}, tmp_path / "vgg12.pth")
+    with pytest.raises(ValueError, match=r"vgg12\.pth: has 12 convolutions and 0 batch norms; U-Net reads VGG16 or VGG16-BN"):
+        from_imagenet_vgg(build_model("unet", 2, 0.125), tmp_path / "vgg12.pth")
+
+
+@pytest.mark.parametrize("batch_norm", [True, False])
+def test_imagenet_weights_fill_the_first_two_convolutions_of_each_unet_level(tmp_path, batch_norm):
+    write_vgg(tmp_path / "vgg.pth", batch_norm=batch_norm, width=0.125)
+    unet = build_model("unet", 2, 0.125)
+    bottom = unet.bottom[0].weight.clone()
+    loaded = from_imagenet_vgg(unet, tmp_path / "vgg.pth")
+    assert len(loaded) == 4 * 2 * (2 + (4 if batch_norm else 0))
+    source = torch.load(tmp_path / "vgg.pth")
+    step = 3 if batch_norm else 2  # torchvision's index of the k-th convolution: conv, [bn,] relu, and a pool after each level
+    first_of_level = [0, 2 * step + 1, 4 * step + 2, 7 * step + 3]  # VGG16's levels hold 2, 2, 3, 3 convolutions
+    for level, index in enumerate(first_of_level):
+        assert torch.equal(unet.down[level][0].weight, source[f"features.{index}.weight"])
+        second = unet.down[level][3]  # conv, bn, relu, conv
+        assert torch.equal(second.weight, source[f"features.{index + step}.weight"])
+    if batch_norm:
+        assert torch.equal(unet.down[3][1].running_var, source[f"features.{7 * step + 3 + 1}.running_var"])
+    assert torch.equal(unet.bottom[0].weight, bottom)  # no VGG counterpart: left as initialised
 
 
 def test_unknown_choices_list_the_valid_ones(compose_config, split_dir, tmp_path, tiny_config):

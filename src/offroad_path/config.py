@@ -249,6 +249,8 @@ class ModelConfig:
     lr_gamma: float = setting(between(0, 1, low_open=True))
     momentum: float = setting(between(0, 1, high_open=True))
     weight_decay: float = setting(at_least(0))
+    imagenet_weights: str = MISSING  # torchvision VGG16(-BN) file that pretraining=imagenet reads for this network
+    paper_steps: int = setting(at_least(1))  # SGD iterations the paper trained it for (experiment=paper caps training there)
 
 
 @dataclass
@@ -279,6 +281,7 @@ class TrainerConfig:
 class PretrainConfig:
     out_dir: str = MISSING
     max_epochs: int | None = setting(at_least(1))  # None: trainer.max_epochs
+    max_steps: int | None = setting(at_least(1))  # None: train.max_steps
 
 
 @dataclass
@@ -288,6 +291,7 @@ class TrainConfig:
     resume: bool = MISSING  # continue an interrupted run from its last.ckpt (in .resume/ beside out_dir); false: start afresh
     sample_images: int = setting(at_least(0))  # validation predictions logged to MLflow each epoch
     channels_last: bool = MISSING  # channels-last memory format (faster with GPU tensor cores)
+    max_steps: int = setting(rule(lambda v: v == -1 or v >= 1, "must be -1 (no cap) or an integer >= 1"))  # SGD steps, besides max_epochs
 
 
 @dataclass

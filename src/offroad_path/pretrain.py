@@ -20,9 +20,11 @@ log = logging.getLogger("offroad_path.pretrain")
 
 
 def pretrain(cfg: DictConfig) -> dict:
+    cfg = cfg.copy()
     if cfg.pretrain.max_epochs is not None:
-        cfg = cfg.copy()
         cfg.trainer.max_epochs = cfg.pretrain.max_epochs
+    if cfg.pretrain.max_steps is not None:
+        cfg.train.max_steps = cfg.pretrain.max_steps
     metrics = fit_segmentation(cfg, "pretrain", "semantic", len(CLASS_NAMES))
     log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])
     return metrics

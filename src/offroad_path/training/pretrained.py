@@ -9,7 +9,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from offroad_path.models import FCN8s, SegmentationNet, SegNet
+from offroad_path.models import FCN8s, SegmentationNet, SegNet, UNet
 from offroad_path.training.checkpoints import CheckpointError, load_checkpoint
 
 CHOICES = ("none", "segmentation", "imagenet")
@@ -61,25 +61,56 @@ def _vgg_state(path: Path | None) -> dict:
     return state
 
 
+VGG16_LEVELS = (2, 2, 3, 3, 3)  # 3x3 convolutions between VGG16's max-pools
+
+
 def from_imagenet_vgg(model: SegmentationNet, path: Path | None) -> list[str]:
-    """Copy VGG16 (FCN) or VGG16-BN (SegNet) ImageNet weights into the encoder, by layer order."""
-    if not isinstance(model, SegNet | FCN8s):
-        raise ValueError("imagenet pretraining exists for the VGG16 encoders of segnet and fcn, not this model")
+    """Copy VGG16 or VGG16-BN ImageNet weights into the encoder: every layer of SegNet's (VGG16-BN)
+    and FCN's (VGG16, fc6 / fc7 as convolutions) by layer order; for U-Net the first two
+    convolutions of each of VGG's first four levels into its four down levels, which have the same
+    shapes (with their batch norms when both have them). U-Net's bottom (1024 channels) has no
+    VGG counterpart and stays random."""
+    if not isinstance(model, SegNet | FCN8s | UNet):
+        raise ValueError(f"imagenet pretraining exists for segnet, fcn and unet, not {type(model).__name__}")
     state = _vgg_state(path)
     index = lambda key: int(key.split(".")[1])  # noqa: E731
     convs = sorted({index(k) for k, v in state.items() if k.startswith("features.") and k.endswith(".weight") and v.ndim == 4})
     norms = sorted({index(k) for k in state if k.startswith("features.") and k.endswith(".running_mean")})
+    pairs = _unet_pairs(model, convs, norms, path) if isinstance(model, UNet) else _encoder_pairs(model, convs, norms, path)
+    return _copy(model, state, pairs, path)
+
+
+def _encoder_pairs(model: SegNet | FCN8s, convs: list[int], norms: list[int], path: Path) -> list[tuple[str, nn.Module, tuple]]:
     encoder = model.encoder if isinstance(model, SegNet) else model.features
     ours_conv = [m for m in encoder.modules() if isinstance(m, nn.Conv2d)]
     ours_bn = [m for m in encoder.modules() if isinstance(m, nn.BatchNorm2d)]
     if len(convs) != len(ours_conv) or len(norms) != len(ours_bn):
         kind = "VGG16-BN" if ours_bn else "VGG16 without batch norm"
         raise ValueError(f"{path}: has {len(convs)} convolutions and {len(norms)} batch norms; this encoder needs {kind}")
-    loaded = []
     pairs = [(f"features.{i}", m, ("weight", "bias")) for i, m in zip(convs, ours_conv, strict=True)]
     pairs += [(f"features.{i}", m, ("weight", "bias", "running_mean", "running_var")) for i, m in zip(norms, ours_bn, strict=True)]
     if isinstance(model, FCN8s):  # fc6 / fc7 as convolutions: the same numbers, reshaped
         pairs += [("classifier.0", model.fc6[0], ("weight", "bias")), ("classifier.3", model.fc7[0], ("weight", "bias"))]
+    return pairs
+
+
+def _unet_pairs(model: UNet, convs: list[int], norms: list[int], path: Path) -> list[tuple[str, nn.Module, tuple]]:
+    if len(convs) != sum(VGG16_LEVELS) or len(norms) not in (0, len(convs)):
+        raise ValueError(f"{path}: has {len(convs)} convolutions and {len(norms)} batch norms; U-Net reads VGG16 or VGG16-BN")
+    pairs = []
+    for level, block in enumerate(model.down):
+        first = sum(VGG16_LEVELS[:level])
+        ours_conv = [m for m in block if isinstance(m, nn.Conv2d)]
+        ours_bn = [m for m in block if isinstance(m, nn.BatchNorm2d)]
+        for k, conv in enumerate(ours_conv):
+            pairs.append((f"features.{convs[first + k]}", conv, ("weight", "bias")))
+            if norms and ours_bn:
+                pairs.append((f"features.{norms[first + k]}", ours_bn[k], ("weight", "bias", "running_mean", "running_var")))
+    return pairs
+
+
+def _copy(model: SegmentationNet, state: dict, pairs: list[tuple[str, nn.Module, tuple]], path: Path) -> list[str]:
+    loaded = []
     names = {id(m): n for n, m in model.named_modules()}
     for key, module, attrs in pairs:
         for attr in attrs:

@@ -114,7 +114,7 @@ class StampConfig(L.Callback):
 
 
 # Settings that change how long a run goes on, not what it computes: a longer run resumes a shorter one.
-LENGTH_SETTINGS = {"max_epochs", "fast_dev_run", "log_every_n_steps"}
+LENGTH_SETTINGS = {"max_epochs", "max_steps", "fast_dev_run", "log_every_n_steps"}
 
 
 @dataclass
@@ -135,6 +135,8 @@ class RunSpec:
     extra_callbacks: list[L.Callback] = field(default_factory=list)
     patience: int | None = None  # early stopping's patience instead of the one in conf/callbacks
     out_key: str = ""  # the config key of out_dir, for messages (default: <stage>.out_dir)
+    max_steps: int = -1  # -1: no cap
+    validate: bool = True  # False (no validation set, the paper's protocol): no early stopping, the last weights are kept
 
 
 PACKAGE = Path(__file__).resolve().parents[1]
@@ -171,11 +173,14 @@ def resume_checkpoint(work: Path, key: str, resume: bool) -> str | None:
 
 
 def callbacks_from(spec: RunSpec, task: BaseTask) -> list[L.Callback]:
-    """conf/callbacks instantiated, early stopping following the task's validation metric."""
+    """conf/callbacks instantiated, early stopping following the task's validation metric (left
+    out when the run has no validation set)."""
     made = []
     for name, node in spec.callbacks.items():
         extra: dict = {}
         if OmegaConf.select(node, "_target_", default="").endswith("EarlyStopping"):
+            if not spec.validate:
+                continue
             extra = {"monitor": task.monitor, "mode": task.mode} | ({"patience": spec.patience} if spec.patience else {})
         try:
             made.append(instantiate(node, **extra))
@@ -209,19 +214,30 @@ def fit(
         warnings.filterwarnings("ignore", message="Checkpoint directory .* exists and is not empty")  # the marker, or a resume
     if resume:
         log.info("resuming from %s", resume)
-    best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
     # Lightning's save_last writes only when the best changes; a resume wants every epoch's end.
     latest = ModelCheckpoint(dirpath=work, filename="last", enable_version_counter=False)
+    checkpoints = [latest]
+    without_validation = {}
+    if spec.validate:
+        best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
+        checkpoints.insert(0, best)
+    else:
+        log.info("no validation set: training runs to its end (max_steps %d, max_epochs %d) and keeps the last weights",
+                 spec.max_steps, spec.max_epochs)  # fmt: skip
+        without_validation = {"limit_val_batches": 0, "num_sanity_val_steps": 0}
     trainer: L.Trainer = instantiate(
-        spec.trainer, max_epochs=spec.max_epochs, logger=logger if logger is not None else False, default_root_dir=work,
-        callbacks=[best, latest, *callbacks_from(spec, task), SeedEachEpoch(spec.seed), StampConfig(key), *spec.extra_callbacks],
+        spec.trainer, max_epochs=spec.max_epochs, max_steps=spec.max_steps, logger=logger if logger is not None else False,
+        default_root_dir=work, **without_validation,
+        callbacks=[*checkpoints, *callbacks_from(spec, task), SeedEachEpoch(spec.seed), StampConfig(key), *spec.extra_callbacks],
         plugins=[AtomicCheckpointIO()], enable_progress_bar=False,
     )  # fmt: skip
     trainer.fit(task, data, ckpt_path=resume, weights_only=True)
-    if best.best_model_path:
+    best_score = None
+    if spec.validate and best.best_model_path:
         load_weights(task, best.best_model_path)
+        best_score = float(best.best_model_score) if best.best_model_score is not None else None
     tested = trainer.test(task, data, verbose=False)[0]
-    metrics = {f"best_{task.monitor.replace('/', '_')}": float(best.best_model_score) if best.best_model_score is not None else None,
+    metrics = {f"best_{task.monitor.replace('/', '_')}": best_score,
                "epochs": trainer.current_epoch, "global_step": trainer.global_step, **{k: float(v) for k, v in tested.items()}}  # fmt: skip
     with atomic_directory(spec.out_dir, spec.stage, spec.inputs, key=spec.out_key or f"{spec.stage}.out_dir") as tmp:
         extra = {"datamodule_hyper_parameters": dict(data.hparams)} if data.hparams else {}
@@ -269,7 +285,7 @@ def fit_segmentation(
     if stage == "train" and cfg.pretraining.name != "none":
         files.append(Path(cfg.pretraining.checkpoint or cfg.pretraining.weights_path or ""))
     spec = RunSpec(stage, out_dir, inputs, cfg.train.seed, cfg.train.resume, cfg.trainer, cfg.callbacks, cfg.trainer.max_epochs, identity,
-                   files, [LogSamples(cfg.train.sample_images)])  # fmt: skip
+                   files, [LogSamples(cfg.train.sample_images)], max_steps=cfg.train.max_steps, validate=bool(data.samples["val"]))  # fmt: skip
     tags = {"stage": stage, "model": m.name, "pretraining": cfg.pretraining.name}
     logger = training_logger(cfg, f"{stage} {m.name}-{cfg.pretraining.name}", tags, OmegaConf.to_container(cfg, resolve=True))
     return fit(task, data, spec, logger, write_more)

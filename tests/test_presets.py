@@ -1,0 +1,61 @@
+"""The full-size presets: experiment=paper is Holder & Breckon 2018 as published (every number
+below is quoted from the paper), experiment=full the same sizes with this project's fixes; both
+train on a CPU at full size for one batch."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from offroad_path.split import split
+from offroad_path.train import train
+
+# "Training continues until ... 60,000 iterations for SegNet, 30,000 iterations for U-Net, and
+# 100,000 iterations for FCN"; "for both SegNet and U-Net ... 1x10^-3, while for FCN it was
+# 1x10^-10" (Caffe's loss summed over the 512 x 288 pixels: 1e-10 * P for a per-pixel mean).
+PAPER_NETWORKS = {"segnet": (60_000, 1e-3), "unet": (30_000, 1e-3), "fcn": (100_000, 1e-10 * 512 * 288)}
+
+
+@pytest.mark.parametrize("model", list(PAPER_NETWORKS))
+def test_paper_preset_has_the_publications_numbers(compose_config, model):
+    cfg = compose_config("experiment=paper", f"model={model}")
+    steps, lr = PAPER_NETWORKS[model]
+    assert cfg.train.max_steps == steps and cfg.model.lr == pytest.approx(lr, rel=1e-3)
+    assert (cfg.model.momentum, cfg.model.weight_decay, cfg.data.batch_size) == (0.9, 5e-4, 6)
+    assert cfg.model.lr_step_epochs > 0 if model == "segnet" else cfg.model.lr_step_epochs == 0  # SegNet's step function, fixed otherwise
+    assert (cfg.data.width, cfg.data.height, cfg.model.width) == (512, 288, 1.0)
+    # Labels: 10 fps, the next D = 20 m, restarted midway, no occlusion handling.
+    assert (cfg.world.fps, cfg.label.distance_m, cfg.label.strategy, cfg.label.occlusion.enabled) == (10.0, 20.0, "midway", False)
+    # "the 10% of our dataset that was set aside for testing", per image, mirrored copies, no validation set.
+    assert (cfg.split.strategy, cfg.split.test_fraction, cfg.split.val_fraction, cfg.split.mirror) == ("random", 0.1, 0.0, True)
+    assert cfg.data.augment is False
+    assert cfg.pretrain.max_steps == 30_000  # the thesis's pretraining length
+
+
+def test_full_preset_is_the_paper_size_with_the_projects_fixes(compose_config):
+    paper, full = compose_config("experiment=paper"), compose_config("experiment=full")
+    for key in ("data.width", "data.height", "model.width", "model.lr", "world.fps", "world.frames", "synthesize.sequences"):
+        assert paper[key.split(".")[0]][key.split(".")[1]] == full[key.split(".")[0]][key.split(".")[1]], key
+    assert (full.split.strategy, full.split.val_fraction, full.label.occlusion.enabled, full.data.augment) == ("grouped", 0.1, True, True)
+    assert full.train.max_steps == -1 and full.callbacks.early_stopping.patience > 0
+
+
+def full_size_on_cpu(tmp_path, split_dir) -> list[str]:
+    return ["model=unet", "data.batch_size=2", "trainer.accelerator=cpu", "trainer.precision=32-true", "trainer.fast_dev_run=true", "data.num_workers=0",
+            "data.pin_memory=false", "mlflow.enabled=false", f"data.split_dir={split_dir}", f"train.out_dir={tmp_path / 'run'}"]  # fmt: skip
+
+
+def test_paper_preset_trains_without_a_validation_set(compose_config, labelled_drive, tmp_path):
+    split_dir = tmp_path / "split"
+    split(compose_config("experiment=paper", f"split.labels_dir={labelled_drive}", f"split.out_dir={split_dir}"))
+    summary = json.loads((split_dir / "summary.json").read_text())
+    assert summary["samples"]["val"] == 0 and summary["samples"]["test"] == 2 * round(0.1 * summary["frames"])
+    metrics = train(compose_config("experiment=paper", *full_size_on_cpu(tmp_path, split_dir)))
+    assert metrics["best_val_iou"] is None and metrics["global_step"] == 1 and 0.0 <= metrics["test/iou"] <= 1.0
+    assert (tmp_path / "run" / "checkpoints" / "best.ckpt").is_file()
+
+
+def test_full_preset_trains_at_full_size(compose_config, split_dir, tmp_path):
+    metrics = train(compose_config("experiment=full", *full_size_on_cpu(tmp_path, split_dir)))
+    assert metrics["global_step"] == 1 and 0.0 <= metrics["test/iou"] <= 1.0
