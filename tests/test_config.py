@@ -28,7 +28,15 @@ def test_the_schemas_hold_no_values():
 
 @pytest.mark.parametrize(
     "overrides",
-    [[], ["experiment=paper"], ["experiment=full"], ["trainer=ddp"], *([f"model={m}"] for m in MODELS), ["pretraining=segmentation"], ["pretraining=imagenet"]],
+    [
+        [],
+        ["experiment=paper"],
+        ["experiment=full"],
+        ["trainer=ddp"],
+        *([f"model={m}"] for m in MODELS),
+        ["pretraining=segmentation"],
+        ["pretraining=imagenet"],
+    ],
 )
 def test_conf_gives_every_setting_a_value(compose_config, overrides):
     cfg = compose_config(*overrides)

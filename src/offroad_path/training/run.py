@@ -285,7 +285,8 @@ def fit_segmentation(
     if stage == "train" and cfg.pretraining.name != "none":
         files.append(Path(cfg.pretraining.checkpoint or cfg.pretraining.weights_path or ""))
     spec = RunSpec(stage, out_dir, inputs, cfg.train.seed, cfg.train.resume, cfg.trainer, cfg.callbacks, cfg.trainer.max_epochs, identity,
-                   files, [LogSamples(cfg.train.sample_images)], max_steps=cfg.train.max_steps, validate=bool(data.samples["val"]))  # fmt: skip
+                   files, [LogSamples(cfg.train.sample_images)], max_steps=cfg.train.max_steps,
+                   validate=bool(data.samples["val"]))  # fmt: skip
     tags = {"stage": stage, "model": m.name, "pretraining": cfg.pretraining.name}
     logger = training_logger(cfg, f"{stage} {m.name}-{cfg.pretraining.name}", tags, OmegaConf.to_container(cfg, resolve=True))
     return fit(task, data, spec, logger, write_more)
