@@ -11,10 +11,14 @@ import torch
 
 from offroad_path.data.manifest import read_manifest
 from offroad_path.geometry.path import distance_along
+from offroad_path.data.dataset import EpochSampler
 from offroad_path.sequence.reader import open_sequence
+from offroad_path.steering.balance import balance_weights, distance_from_mean, inverse_frequency
+from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, steering_metrics
 from offroad_path.steering.frames import steering_split
 from offroad_path.steering.pilotnet import PilotNet, feature_size
+from offroad_path.steering.task import weighted_mse
 from offroad_path.train_steering import train_steering
 
 
@@ -63,6 +67,38 @@ def test_split_follows_the_path_split(compose_config, labelled_drive, split_dir)
     for a, b in zip(parts["test"][::2], parts["test"][1::2], strict=True):
         assert (a.frame, a.mirrored, b.mirrored) == (b.frame, False, True) and b.steering == -a.steering
         assert a.steering == pytest.approx(seq.steering[a.frame])
+
+
+def test_balance_weights_on_hand_made_angles():
+    # |s| bins of 0.1: three frames in [0, 0.1), one in [0.2, 0.3): each bin gets the same total weight
+    assert inverse_frequency(np.array([0.01, -0.02, 0.03, 0.25])) == pytest.approx([2 / 3, 2 / 3, 2 / 3, 2])
+    # mean 0, distances 1, 0, 1 (mean 2/3): 1 + d / (2/3) = 2.5, 1, 2.5, then mean 1
+    assert distance_from_mean(np.array([-1.0, 0.0, 1.0])) == pytest.approx([1.25, 0.5, 1.25])
+    assert balance_weights(np.zeros(3), "none") == (None, None)
+    with pytest.raises(ValueError, match="valid: none, oversample, weighted"):
+        balance_weights(np.zeros(3), "smote")
+    # the weighted loss: (2 * 0.1^2 + 0.5 * 0.4^2) / 2
+    loss = weighted_mse(torch.tensor([0.1, 0.4]), torch.tensor([0.0, 0.0]), torch.tensor([2.0, 0.5]))
+    assert loss.item() == pytest.approx((0.02 + 0.08) / 2)
+
+
+def test_oversampling_draws_by_weight_and_replays_each_epoch():
+    sampler = EpochSampler(4, seed=3, weights=np.array([0.0, 3.0, 0.0, 1.0]))
+    sampler.set_epoch(1)
+    drawn = [i for i, _ in sampler]
+    assert set(drawn) <= {1, 3} and len(drawn) == 4 and drawn == [i for i, _ in sampler]
+    counts = np.bincount([i for e in range(200) for i, _ in (sampler.set_epoch(e) or sampler)], minlength=4)
+    assert counts[1] / counts[3] == pytest.approx(3.0, rel=0.15)
+
+
+@pytest.mark.parametrize("balance", ["oversample", "weighted"])
+def test_balance_reaches_the_training_loader_only(compose_config, labelled_drive, split_dir, balance):
+    cfg = compose_config("split.block_m=4", "split.guard_m=3", f"steering.balance={balance}")
+    parts = steering_split(labelled_drive, split_dir, cfg.split.block_m, cfg.split.guard_m, mirror=True)
+    data = SteeringDataModule(parts, cfg.steering)
+    train, val = data.train_dataloader(), data.val_dataloader()
+    assert (train.sampler.weights is not None) == (balance == "oversample")
+    assert ("weight" in train.dataset[0]) == (balance == "weighted") and "weight" not in val.dataset[0]
 
 
 def test_stage_fast_dev_run_writes_its_outputs(compose_config, labelled_drive, split_dir, tmp_path):

@@ -17,6 +17,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from offroad_path.steering.balance import BALANCES
 from offroad_path.utils.rules import at_least, between, each, numbers, one_of, positive, rule, setting, validate
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
@@ -350,6 +351,7 @@ class SteeringConfig:
     patience: int = setting(at_least(1))  # early stopping on validation mean absolute error
     mirror: bool = MISSING  # add mirrored copies with negated steering
     jitter: float = MISSING  # photometric augmentation (no geometric: it would change the steering)
+    balance: str = setting(one_of(BALANCES))  # the straight-ahead bias's remedy: none | oversample | weighted
     seed: int = MISSING
     lock_deg: float = setting(positive())  # road-wheel angle of normalised steering 1, for errors in degrees
     steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree

@@ -94,10 +94,13 @@ def transforms(width: int, height: int, augmentation: Augmentation | None = None
 class EpochSampler(Sampler):
     """Shuffles with a generator seeded by (seed, epoch) and gives each sample its own augmentation
     seed: an epoch is the same whether a run went straight through or was resumed before it.
-    Lightning calls set_epoch before each training epoch, as it does for a DistributedSampler."""
+    Lightning calls set_epoch before each training epoch, as it does for a DistributedSampler.
+    With `weights`, an epoch is `size` draws with replacement, each sample drawn in proportion to
+    its weight (oversampling)."""
 
-    def __init__(self, size: int, seed: int, shuffle: bool = True):
+    def __init__(self, size: int, seed: int, shuffle: bool = True, weights: np.ndarray | None = None):
         self.size, self.seed, self.shuffle, self.epoch = size, seed, shuffle, 0
+        self.weights = None if weights is None else torch.as_tensor(weights, dtype=torch.float64)
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
@@ -107,7 +110,10 @@ class EpochSampler(Sampler):
 
     def __iter__(self) -> Iterator[tuple[int, int]]:
         generator = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
-        order = torch.randperm(self.size, generator=generator) if self.shuffle else torch.arange(self.size)
+        if self.weights is not None:
+            order = torch.multinomial(self.weights, self.size, replacement=True, generator=generator)
+        else:
+            order = torch.randperm(self.size, generator=generator) if self.shuffle else torch.arange(self.size)
         seeds = torch.randint(0, 2**31 - 1, (self.size,), generator=generator)
         return iter(zip(order.tolist(), seeds.tolist(), strict=True))
 

@@ -13,6 +13,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.dataset import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
+from offroad_path.evaluation.conditions import ConditionTable, by_condition, read_conditions
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases, save_png
 from offroad_path.evaluation.metrics import Scores, counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
 from offroad_path.evaluation.steering import SteeringComparison
@@ -33,6 +34,9 @@ class Report:
     curves: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)  # run -> precision-recall curve
     baselines: dict[str, Scores] = field(default_factory=dict)  # "non_corresponding.<run>", "mean_path_prior"
     steering: SteeringComparison | None = None  # steering from the paths against PilotNet
+    counts: dict[str, np.ndarray] = field(default_factory=dict)  # method title -> raw per-image counts, for the conditions
+    method_keys: dict[str, str] = field(default_factory=dict)  # method title -> its metrics key
+    conditions: ConditionTable | None = None  # IoU by condition (rendered worlds only)
 
     def table(self) -> list[ResultRow]:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
@@ -49,6 +53,8 @@ class Report:
         out["baselines"] = {name: _numbers(s) for name, s in self.baselines.items()}
         if self.steering is not None and self.steering.rows:
             out["steering_from_paths"] = {key: _numbers(row) for key, row in self.steering.rows.items()}
+        if self.conditions is not None:
+            out["by_condition"] = self.conditions.metrics(self.method_keys)
         return out
 
 
@@ -88,13 +94,19 @@ def score_runs(e: DictConfig) -> Report:
             )
             report.per_image_iou[run, pp] = ious
             if pp == "no":
+                title = f"{network_name(model)} ({pretraining})"
+                report.counts[title], report.method_keys[title] = per_image, run
                 report.curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
                 report.baselines[f"non_corresponding.{run}"] = baseline(maps > e.threshold, labels, report.samples)
-                report.steering.add(run, f"{network_name(model)} ({pretraining}) + pure pursuit", maps > e.threshold)
+                report.steering.add(run, f"{title} + pure pursuit", maps > e.threshold)
         log.info("%s: IoU %.3f, post-processed %.3f", run, report.rows[run, "no"].iou, report.rows[run, "yes"].iou)
     prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
     everywhere = np.broadcast_to(prior, labels.shape).astype(np.float32)
-    report.baselines["mean_path_prior"] = pooled(counts(everywhere, labels, e.threshold))
+    prior_counts = counts(everywhere, labels, e.threshold)
+    report.baselines["mean_path_prior"] = pooled(prior_counts)
+    if (conditions := read_conditions(report.samples)) is not None:
+        report.counts["mean path prior"], report.method_keys["mean path prior"] = prior_counts, "mean_path_prior"
+        report.conditions = by_condition(conditions, report.counts)
     return report
 
 
@@ -118,7 +130,7 @@ def write_report(e: DictConfig, report: Report) -> None:
             "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(table) +
             "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
             "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(report.baseline_rows())
-            + steering_section(e, report)
+            + steering_section(e, report) + conditions_section(report)
         )  # fmt: skip
         (tmp / "results.csv").write_text(csv_text(table))
         save_png(tmp / "figures" / "good_and_bad_cases.png", cases_figure(report, e.figure_cases, e.figure_scale))
@@ -141,6 +153,17 @@ def steering_section(e: DictConfig, report: Report) -> str:
         "from the ground-truth path label, and PilotNet's. Degrees at the road wheels are the normalised error times the "
         f"vehicle's steering lock; at the steering wheel, times the steering ratio {s.steering_ratio:g}.\n\n"
         + markdown_table(report.steering.table())
+    )
+
+
+def conditions_section(report: Report) -> str:
+    """The IoU-by-condition table for results.md (empty without the world's conditions)."""
+    if report.conditions is None:
+        return ""
+    return (
+        "\n## Results by condition\n\nPooled IoU (raw maps) over the test frames of each group, from what the world knows "
+        "about the next 20 m of driving (conditions.csv of each sequence); a frame can be in several groups. "
+        "The mean path prior shows how hard a group is for a network that ignores the image.\n\n" + report.conditions.markdown()
     )
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import albumentations as A
 import cv2
 import lightning as L
+import numpy as np
 import torch
 from albumentations.pytorch import ToTensorV2
 from omegaconf import DictConfig
@@ -12,6 +13,7 @@ from torch.utils.data import DataLoader, Dataset
 
 from offroad_path.data.dataset import EpochSampler, read
 from offroad_path.geometry.path import mirror
+from offroad_path.steering.balance import balance_weights
 from offroad_path.steering.frames import SteeringFrame
 
 
@@ -24,9 +26,12 @@ def steering_transforms(width: int, height: int, jitter: float, seed: int) -> A.
 
 
 class SteeringDataset(Dataset):
-    def __init__(self, frames: list[SteeringFrame], transform: A.Compose):
+    """Images and angles; with `loss_weights`, each item also carries its frame's weight in the loss."""
+
+    def __init__(self, frames: list[SteeringFrame], transform: A.Compose, loss_weights: np.ndarray | None = None):
         self.frames = frames
         self.transform = transform
+        self.loss_weights = loss_weights
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -40,12 +45,15 @@ class SteeringDataset(Dataset):
         image = cv2.cvtColor(read(frame.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
         if frame.mirrored:
             image = mirror(image)
-        return {"image": self.transform(image=image)["image"], "steering": torch.tensor(frame.steering, dtype=torch.float32)}
+        item = {"image": self.transform(image=image)["image"], "steering": torch.tensor(frame.steering, dtype=torch.float32)}
+        if self.loss_weights is not None:
+            item["weight"] = torch.tensor(self.loss_weights[i], dtype=torch.float32)
+        return item
 
 
 class SteeringDataModule(L.LightningDataModule):
     """train / val / test loaders of the steering frames, by the `steering` settings (width, height,
-    batch_size, jitter, seed)."""
+    batch_size, jitter, seed, balance: see offroad_path.steering.balance)."""
 
     def __init__(self, parts: dict[str, list[SteeringFrame]], s: DictConfig):
         super().__init__()
@@ -54,8 +62,9 @@ class SteeringDataModule(L.LightningDataModule):
     def _loader(self, part: str, train: bool) -> DataLoader:
         s = self.s
         transform = steering_transforms(s.width, s.height, s.jitter if train else 0.0, s.seed)
-        dataset = SteeringDataset(self.parts[part], transform)
-        return DataLoader(dataset, s.batch_size, sampler=EpochSampler(len(dataset), s.seed) if train else None)
+        sampling, loss = balance_weights(np.array([f.steering for f in self.parts[part]]), s.balance) if train else (None, None)
+        dataset = SteeringDataset(self.parts[part], transform, loss)
+        return DataLoader(dataset, s.batch_size, sampler=EpochSampler(len(dataset), s.seed, weights=sampling) if train else None)
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train", train=True)

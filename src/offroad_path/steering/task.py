@@ -12,6 +12,11 @@ from offroad_path.steering.pilotnet import PilotNet
 from offroad_path.training.task import BaseTask
 
 
+def weighted_mse(predicted: torch.Tensor, true: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean squared error, each frame's term times its weight (steering.balance=weighted; training only)."""
+    return F.mse_loss(predicted, true) if weight is None else (weight * (predicted - true) ** 2).mean()
+
+
 class SteeringTask(BaseTask):
     monitor, mode = "val/mae", "min"
 
@@ -31,7 +36,8 @@ class SteeringTask(BaseTask):
         self.model = PilotNet(self.hparams.width, self.hparams.height)
 
     def configure_losses(self) -> None:
-        self.loss = F.mse_loss
+        self.loss = weighted_mse
+
 
     def configure_metrics(self) -> None:
         self.mae = torch.nn.ModuleDict({f"{split}_mae": MeanAbsoluteError() for split in ("train", "val", "test")})
@@ -41,7 +47,7 @@ class SteeringTask(BaseTask):
 
     def _step(self, batch: dict, split: str) -> torch.Tensor:
         predicted = self(batch["image"])
-        loss = self.loss(predicted, batch["steering"])
+        loss = self.loss(predicted, batch["steering"], batch.get("weight"))
         mae = self.mae[f"{split}_mae"]
         mae.update(predicted, batch["steering"])
         self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(predicted))

@@ -54,6 +54,7 @@ class World:
     poses: np.ndarray  # (frames, 4, 4) left camera to world
     steering: np.ndarray  # (frames,) normalised steering
     textures: dict[str, np.ndarray]
+    forks: list[Curve]  # side tracks the drive does not take
 
 
 def vehicle_geometry(cfg: WorldConfig) -> VehicleGeometry:
@@ -116,7 +117,7 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
     shadow = _shadow_map(mgrid, terrain, objects, sky.sun)
     palette = _palette(rng)
     textures = _textures(rng)
-    return World(terrain, materials, mgrid, shadow, objects, palette, sky, drive, track, frame_s, poses, steering, textures)
+    return World(terrain, materials, mgrid, shadow, objects, palette, sky, drive, track, frame_s, poses, steering, textures, forks)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> Grid:
