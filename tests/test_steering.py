@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import torch
 
+from offroad_path.data.dataset import EpochSampler
 from offroad_path.data.manifest import read_manifest
 from offroad_path.geometry.path import distance_along
-from offroad_path.data.dataset import EpochSampler
 from offroad_path.sequence.reader import open_sequence
 from offroad_path.steering.balance import balance_weights, distance_from_mean, inverse_frequency
 from offroad_path.steering.dataset import SteeringDataModule

@@ -71,8 +71,7 @@ class ConditionTable:
     def metrics(self, method_keys: dict[str, str]) -> dict:
         """{condition key: {'frames': n, <method key>: IoU or None}} for metrics.json."""
         return {
-            key: {"frames": self.frames[i]}
-            | {method_keys[m]: (None if v[i] != v[i] else round(v[i], 6)) for m, v in self.iou.items()}
+            key: {"frames": self.frames[i]} | {method_keys[m]: (None if v[i] != v[i] else round(v[i], 6)) for m, v in self.iou.items()}
             for i, key in enumerate(self.keys)
         }
 

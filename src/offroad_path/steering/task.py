@@ -38,7 +38,6 @@ class SteeringTask(BaseTask):
     def configure_losses(self) -> None:
         self.loss = weighted_mse
 
-
     def configure_metrics(self) -> None:
         self.mae = torch.nn.ModuleDict({f"{split}_mae": MeanAbsoluteError() for split in ("train", "val", "test")})
 

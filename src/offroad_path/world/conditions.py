@@ -54,6 +54,11 @@ def frame_conditions(world: World, cfg: WorldConfig, distance_m: float = 20.0, n
     return rows
 
 
+def conditions_csv(rows: list[dict]) -> str:
+    """The text of conditions.csv: a header of COLUMNS, one line per frame."""
+    return ",".join(COLUMNS) + "\n" + "".join(",".join(str(row[c]) for c in COLUMNS) + "\n" for row in rows)
+
+
 def _across(xz: np.ndarray, heading: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """Points (N * len(offsets), 2) at `offsets` metres to the right of each centre point."""
     normal = np.stack([np.cos(heading), -np.sin(heading)], axis=1)

@@ -19,7 +19,7 @@ from offroad_path.sequence.calibration import StereoCalibration
 from offroad_path.sequence.poses import poses_to_text
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
-from offroad_path.world.conditions import COLUMNS, frame_conditions
+from offroad_path.world.conditions import conditions_csv, frame_conditions
 from offroad_path.world.render import PinholeCamera, render_view
 from offroad_path.world.scene import build_world
 
@@ -72,8 +72,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path) -> dict:
     (out_dir / "poses.txt").write_text(poses_to_text(relative))
     (out_dir / "times.txt").write_text("".join(f"{k / cfg.fps:.6f}\n" for k in range(len(world.poses))))
     (out_dir / "steering.txt").write_text("".join(f"{s:.6f}\n" for s in world.steering))
-    conditions = frame_conditions(world, cfg)
-    (out_dir / "conditions.csv").write_text(",".join(COLUMNS) + "\n" + "".join(",".join(str(r[c]) for c in COLUMNS) + "\n" for r in conditions))
+    (out_dir / "conditions.csv").write_text(conditions_csv(frame_conditions(world, cfg)))
     v = cfg.vehicle
     distance = path_length(world.poses)
     meta = {
