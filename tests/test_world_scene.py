@@ -80,6 +80,6 @@ def test_same_seed_same_bytes(compose_config, tmp_path):
     record_sequence(cfg, 11, tmp_path / "b")
     record_sequence(cfg, 12, tmp_path / "c")
     a, b, c = _digest(tmp_path / "a"), _digest(tmp_path / "b"), _digest(tmp_path / "c")
-    assert len(a) == 8 + 5  # 4 folders x 2 frames, calib, poses, times, steering, meta
+    assert len(a) == 8 + 6  # 4 folders x 2 frames, calib, poses, times, steering, conditions, meta
     assert a == b
     assert a["image_l/000000.png"] != c["image_l/000000.png"]
