@@ -323,6 +323,7 @@ class EvaluateConfig:
     labels_dir: str = MISSING  # the label run: steering, calibration and vehicle of each test frame
     steering_from_paths: SteeringFromPathsConfig = field(default_factory=SteeringFromPathsConfig)
     train_manifest: str = MISSING  # for the mean-path prior
+    real_labels_dir: str | None = MISSING  # a label run of real footage: every network scored on it too (null: none)
     threshold: float = setting(between(0, 1))  # path where C > threshold
     pr_thresholds: int = setting(at_least(2))
     out_dir: str = MISSING  # results table, figures

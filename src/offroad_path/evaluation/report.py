@@ -16,6 +16,7 @@ from offroad_path.data.manifest import Sample, read_manifest, read_predictions_m
 from offroad_path.evaluation.conditions import ConditionTable, by_condition, read_conditions
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases, save_png
 from offroad_path.evaluation.metrics import Scores, counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
+from offroad_path.evaluation.real import RealFrames, RealRow, score_real
 from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, csv_text, markdown_table, network_name, split_run_name
 from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
@@ -37,6 +38,8 @@ class Report:
     counts: dict[str, np.ndarray] = field(default_factory=dict)  # method title -> raw per-image counts, for the conditions
     method_keys: dict[str, str] = field(default_factory=dict)  # method title -> its metrics key
     conditions: ConditionTable | None = None  # IoU by condition (rendered worlds only)
+    real: dict[str, RealRow] | None = None  # every run on a labelled real recording (evaluate.real_labels_dir)
+    real_name: str = ""
 
     def table(self) -> list[ResultRow]:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
@@ -55,6 +58,8 @@ class Report:
             out["steering_from_paths"] = {key: _numbers(row) for key, row in self.steering.rows.items()}
         if self.conditions is not None:
             out["by_condition"] = self.conditions.metrics(self.method_keys)
+        if self.real is not None:
+            out["real_footage"] = {key: _numbers(row) for key, row in self.real.items()}
         return out
 
 
@@ -107,11 +112,14 @@ def score_runs(e: DictConfig) -> Report:
     if (conditions := read_conditions(report.samples)) is not None:
         report.counts["mean path prior"], report.method_keys["mean path prior"] = prior_counts, "mean_path_prior"
         report.conditions = by_condition(conditions, report.counts)
+    if e.real_labels_dir:
+        frames = RealFrames.read(Path(e.real_labels_dir))
+        report.real, report.real_name = score_real(report.runs, Path(e.runs_dir), frames, prior, e.threshold), e.real_labels_dir
     return report
 
 
 def evaluate_inputs(e: DictConfig) -> list[str]:
-    return [e.runs_dir, e.postprocessed_dir, str(Path(e.train_manifest).parent)]
+    return [e.runs_dir, e.postprocessed_dir, str(Path(e.train_manifest).parent), *([e.real_labels_dir] if e.real_labels_dir else [])]
 
 
 def check_outputs(e: DictConfig) -> None:
@@ -130,7 +138,7 @@ def write_report(e: DictConfig, report: Report) -> None:
             "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(table) +
             "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
             "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(report.baseline_rows())
-            + steering_section(e, report) + conditions_section(report)
+            + steering_section(e, report) + conditions_section(report) + real_section(report)
         )  # fmt: skip
         (tmp / "results.csv").write_text(csv_text(table))
         save_png(tmp / "figures" / "good_and_bad_cases.png", cases_figure(report, e.figure_cases, e.figure_scale))
@@ -164,6 +172,19 @@ def conditions_section(report: Report) -> str:
         "\n## Results by condition\n\nPooled IoU (raw maps) over the test frames of each group, from what the world knows "
         "about the next 20 m of driving (conditions.csv of each sequence); a frame can be in several groups. "
         "The mean path prior shows how hard a group is for a network that ignores the image.\n\n" + report.conditions.markdown()
+    )
+
+
+def real_section(report: Report) -> str:
+    """The real-footage rows for results.md (empty unless evaluate.real_labels_dir is set)."""
+    if report.real is None:
+        return ""
+    return (
+        f"\n## Real footage ({report.real_name})\n\nEach network, trained on the synthetic world, run on the labelled frames of "
+        "a real recording (VO labels) and scored against each frame's own label and, averaged over pairs, against the other "
+        "frames' labels. A network that perceives the path scores higher on its own frame; one that paints a fixed "
+        "prior scores about the same on both, like the mean path of the synthetic training labels.\n\n"
+        + markdown_table(list(report.real.values()))
     )
 
 
