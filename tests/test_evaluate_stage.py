@@ -26,7 +26,8 @@ def stage_config(compose_config, split_dir: Path, root: Path, *overrides: str):
         f"split.out_dir={split_dir}", f"split.labels_dir={labels_dir}", f"steering.out_dir={root / 'steering'}",
         f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
         f"evaluate.out_dir={root / 'evaluation'}", f"evaluate.metrics_path={root / 'metrics.json'}",
-        f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}", *overrides,
+        f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}",
+        "evaluate.temporal.enabled=false", *overrides,  # made-up maps, no networks to run on every frame (tests/test_temporal.py)
     )  # fmt: skip
 
 

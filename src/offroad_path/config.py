@@ -17,12 +17,12 @@ from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from offroad_path.steering.balance import BALANCES
 from offroad_path.utils.rules import at_least, between, each, numbers, one_of, positive, rule, setting, validate
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 IMAGE_SIZE = between(16, 8192)  # pixels of an image side
 PRETRAININGS = ("none", "segmentation", "imagenet")
+BALANCES = ("none", "oversample", "weighted")  # steering.balance (offroad_path.steering.balance)
 
 
 def _model_names() -> list[str]:
@@ -314,6 +314,12 @@ class SteeringFromPathsConfig:
 
 
 @dataclass
+class TemporalConfig:
+    enabled: bool = MISSING  # every frame of the test blocks, with and without the temporal filter (synthetic test sets)
+    alpha: float = setting(between(0, 1, low_open=True))  # the current frame's weight in the fused confidence
+
+
+@dataclass
 class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
@@ -323,6 +329,7 @@ class EvaluateConfig:
     labels_dir: str = MISSING  # the label run: steering, calibration and vehicle of each test frame
     steering_from_paths: SteeringFromPathsConfig = field(default_factory=SteeringFromPathsConfig)
     train_manifest: str = MISSING  # for the mean-path prior
+    temporal: TemporalConfig = field(default_factory=TemporalConfig)
     real_labels_dir: str | None = MISSING  # a label run of real footage: every network scored on it too (null: none)
     threshold: float = setting(between(0, 1))  # path where C > threshold
     pr_thresholds: int = setting(at_least(2))

@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 
 from offroad_path.evaluation.report import Report, check_outputs, score_runs, write_report
 from offroad_path.evaluation.tables import ResultRow, split_run_name
+from offroad_path.evaluation.temporal import score_temporal
 from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.tracking import stage_run, tracking_uri
 
@@ -27,6 +28,7 @@ log = logging.getLogger("offroad_path.evaluate")
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
     check_outputs(cfg.evaluate)
     report = score_runs(cfg.evaluate)
+    report.temporal = score_temporal(cfg, report.runs, report.samples)
     write_report(cfg.evaluate, report)
     log_to_mlflow(cfg, report)
     return report.table()

@@ -19,6 +19,7 @@ from offroad_path.evaluation.metrics import Scores, counts, mean_path, non_corre
 from offroad_path.evaluation.real import RealFrames, RealRow, score_real
 from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, csv_text, markdown_table, network_name, split_run_name
+from offroad_path.evaluation.temporal import TemporalRow
 from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -40,6 +41,7 @@ class Report:
     conditions: ConditionTable | None = None  # IoU by condition (rendered worlds only)
     real: dict[str, RealRow] | None = None  # every run on a labelled real recording (evaluate.real_labels_dir)
     real_name: str = ""
+    temporal: dict[str, TemporalRow] | None = None  # every test-block frame, with and without the temporal filter
 
     def table(self) -> list[ResultRow]:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
@@ -58,6 +60,8 @@ class Report:
             out["steering_from_paths"] = {key: _numbers(row) for key, row in self.steering.rows.items()}
         if self.conditions is not None:
             out["by_condition"] = self.conditions.metrics(self.method_keys)
+        if self.temporal is not None:
+            out["temporal"] = {key: _numbers(row) for key, row in self.temporal.items()}
         if self.real is not None:
             out["real_footage"] = {key: _numbers(row) for key, row in self.real.items()}
         return out
@@ -114,7 +118,7 @@ def score_runs(e: DictConfig) -> Report:
         report.conditions = by_condition(conditions, report.counts)
     if e.real_labels_dir:
         frames = RealFrames.read(Path(e.real_labels_dir))
-        report.real, report.real_name = score_real(report.runs, Path(e.runs_dir), frames, prior, e.threshold), e.real_labels_dir
+        report.real, report.real_name = score_real(report.runs, Path(e.runs_dir), frames, prior, e.threshold), Path(e.real_labels_dir).name
     return report
 
 
@@ -138,7 +142,7 @@ def write_report(e: DictConfig, report: Report) -> None:
             "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(table) +
             "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
             "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(report.baseline_rows())
-            + steering_section(e, report) + conditions_section(report) + real_section(report)
+            + steering_section(e, report) + conditions_section(report) + temporal_section(e, report) + real_section(report)
         )  # fmt: skip
         (tmp / "results.csv").write_text(csv_text(table))
         save_png(tmp / "figures" / "good_and_bad_cases.png", cases_figure(report, e.figure_cases, e.figure_scale))
@@ -172,6 +176,19 @@ def conditions_section(report: Report) -> str:
         "\n## Results by condition\n\nPooled IoU (raw maps) over the test frames of each group, from what the world knows "
         "about the next 20 m of driving (conditions.csv of each sequence); a frame can be in several groups. "
         "The mean path prior shows how hard a group is for a network that ignores the image.\n\n" + report.conditions.markdown()
+    )
+
+
+def temporal_section(e: DictConfig, report: Report) -> str:
+    """The temporal-consistency table for results.md (empty when it was not run)."""
+    if not report.temporal:
+        return ""
+    return (
+        "\n## Temporal consistency\n\nEvery frame from the first to the last test frame of each block of driving, labelled "
+        "exactly from the world's true poses and depth (so IoU here is not the table's, which scores VO labels). Filtered: the "
+        "previous fused confidence carried into each frame by the VO pose and stereo depth, then averaged with the current "
+        f"prediction (weight {e.temporal.alpha:g} on the current). Stability: the mean IoU of each thresholded path with the "
+        "previous one carried into its frame by the true pose and depth.\n\n" + markdown_table(list(report.temporal.values()))
     )
 
 

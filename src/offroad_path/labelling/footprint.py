@@ -12,8 +12,19 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from offroad_path.sequence.errors import SequenceError
+from offroad_path.sequence.reader import Sequence
+
 NEAR_M = 0.3
 SUBPIXEL_BITS = 4
+# Config key -> meta.json key for the vehicle footprint.
+FOOTPRINT_META = {
+    "width_m": "vehicle_width_m",
+    "front_m": "footprint_front_m",
+    "rear_m": "footprint_rear_m",
+    "camera_height_m": "camera_height_m",
+    "camera_pitch_deg": "camera_pitch_deg",
+}
 
 
 @dataclass(frozen=True)
@@ -33,6 +44,19 @@ class VehicleFootprint:
         # Vehicle-level (x, down, forward) to the camera pitched down by `tilt` about x.
         rotation = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(tilt), -np.sin(tilt)], [0.0, np.sin(tilt), np.cos(tilt)]])
         return level @ rotation.T
+
+
+def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
+    """The vehicle footprint from config, else from the sequence's meta.json."""
+    values = {}
+    for key, meta_key in FOOTPRINT_META.items():
+        value = cfg.get(key)
+        if value is None:
+            value = seq.meta.get(meta_key, 0.0 if key == "camera_pitch_deg" else None)
+        if value is None:
+            raise SequenceError(seq.root / "meta.json", f"gives no {meta_key}: set label.footprint.{key} for this recording")
+        values[key] = float(value)
+    return VehicleFootprint(**values)
 
 
 def clip_near(polygon: np.ndarray, near: float = NEAR_M) -> np.ndarray:

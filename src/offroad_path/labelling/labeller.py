@@ -15,7 +15,7 @@ import numpy as np
 from offroad_path.config import OdometryConfig
 from offroad_path.geometry.path import distance_along
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, encode_disparity, sgbm
-from offroad_path.labelling.footprint import Occlusion, VehicleFootprint, footprint_depth, path_mask, swept_polygons
+from offroad_path.labelling.footprint import Occlusion, footprint_depth, footprint_for, path_mask, swept_polygons
 from offroad_path.labelling.frame_selection import select_segments
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
@@ -26,14 +26,6 @@ from offroad_path.sequence.reader import Sequence
 log = logging.getLogger(__name__)
 
 POSE_SOURCES = ("vo", "file")
-# Config key -> meta.json key for the vehicle footprint.
-FOOTPRINT_META = {
-    "width_m": "vehicle_width_m",
-    "front_m": "footprint_front_m",
-    "rear_m": "footprint_rear_m",
-    "camera_height_m": "camera_height_m",
-    "camera_pitch_deg": "camera_pitch_deg",
-}
 
 
 @dataclass
@@ -47,19 +39,6 @@ class SegmentReport:
     kept: bool
     reason: str  # why it was dropped; empty when kept
     label_pixels: int
-
-
-def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
-    """The vehicle footprint from config, else from the sequence's meta.json."""
-    values = {}
-    for key, meta_key in FOOTPRINT_META.items():
-        value = cfg.get(key)
-        if value is None:
-            value = seq.meta.get(meta_key, 0.0 if key == "camera_pitch_deg" else None)
-        if value is None:
-            raise SequenceError(seq.root / "meta.json", f"gives no {meta_key}: set label.footprint.{key} for this recording")
-        values[key] = float(value)
-    return VehicleFootprint(**values)
 
 
 def pose_file(seq: Sequence, cfg) -> Path:

@@ -14,7 +14,7 @@ from omegaconf import DictConfig
 
 from offroad_path import __version__
 from offroad_path.geometry.path import path_length
-from offroad_path.labelling.labeller import FOOTPRINT_META
+from offroad_path.labelling.footprint import FOOTPRINT_META
 from offroad_path.recordings.rectify import Rectifier, contact_sheet, epipolar_error
 from offroad_path.recordings.sources import BagSource, VideoSource
 from offroad_path.recordings.sync import Subsampler
