@@ -85,7 +85,14 @@ def test_scores_match_the_known_predictions(scored):
 
 def test_outputs_follow_the_contract(scored, tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert set(metrics) == {"unet-none", "fcn-none", "baselines", "steering_from_paths"} and metrics["unet-none"]["raw"]["iou"] == 1.0
+    assert set(metrics) == {"unet-none", "fcn-none", "baselines", "steering_from_paths", "by_condition"}
+    assert metrics["unet-none"]["raw"]["iou"] == 1.0
+    # by condition (the rendered drive's conditions.csv): the perfect maps score 1 in every group that has frames
+    groups = metrics["by_condition"]
+    assert groups["all"]["frames"] == len(read_predictions_manifest(tmp_path / "runs" / "unet-none" / "predictions" / "manifest.csv"))
+    assert all(g["unet-none"] == 1.0 for g in groups.values() if g["frames"])
+    assert groups["all"]["fcn-none"] == metrics["fcn-none"]["raw"]["iou"]
+    assert "## Results by condition" in (tmp_path / "evaluation" / "results.md").read_text()
     assert set(metrics["baselines"]) == {"non_corresponding.unet-none", "non_corresponding.fcn-none", "mean_path_prior"}
     assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 | 1.000 |" in (tmp_path / "evaluation" / "results.md").read_text()
     assert len((tmp_path / "evaluation" / "results.csv").read_text().splitlines()) == 5
