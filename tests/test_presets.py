@@ -42,8 +42,8 @@ def test_full_preset_is_the_paper_size_with_the_projects_fixes(compose_config):
 
 
 def full_size_on_cpu(tmp_path, split_dir) -> list[str]:
-    """One batch of 2 at 512 x 288 through the width-1 U-Net, on the CPU in fp32."""
-    return ["model=unet", "data.batch_size=2", "trainer.accelerator=cpu", "trainer.precision=32-true", "trainer.fast_dev_run=true",
+    """One batch of 1 at 512 x 288 through the width-1 U-Net, on the CPU in fp32."""
+    return ["model=unet", "data.batch_size=1", "trainer.accelerator=cpu", "trainer.precision=32-true", "trainer.fast_dev_run=true",
             "data.num_workers=0", "data.pin_memory=false", "mlflow.enabled=false", f"data.split_dir={split_dir}",
             f"train.out_dir={tmp_path / 'run'}"]  # fmt: skip
 
