@@ -100,6 +100,7 @@ def tiny_repo(repo: Path) -> Path:
     preset["trainer"]["max_epochs"] = 1
     preset["pretrain"]["max_epochs"] = 1
     preset["steering"] = {"max_epochs": 1}
+    preset["evaluate"] = {"temporal": {"enabled": False}}  # run three times here; tests/test_temporal.py scores it once
     laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
     (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
     git(repo, "init", "-q")

@@ -4,12 +4,14 @@ test blocks (exact labels are steady; shaking them is measured)."""
 
 from __future__ import annotations
 
+import shutil
+
 import cv2
 import numpy as np
 import pytest
 
 from offroad_path.data.manifest import read_manifest
-from offroad_path.evaluation.temporal import held_out_blocks, load_block, stability
+from offroad_path.evaluation.temporal import held_out_blocks, load_block, score_temporal, stability
 from offroad_path.postprocessing.temporal import TemporalFilter, warp_previous
 from offroad_path.sequence.reader import open_sequence
 
@@ -65,3 +67,18 @@ def test_exact_labels_of_every_test_block_frame_are_steady(compose_config, label
     steady = stability(block.labels, block)
     shaken = stability(np.stack([np.roll(m, 12 * (-1) ** i, axis=1) for i, m in enumerate(block.labels)]), block)
     assert min(steady) > 0.85 and np.mean(shaken) < np.mean(steady) - 0.05
+
+
+def test_every_network_scored_on_every_test_block_frame(compose_config, labelled_drive, split_dir, trained, tmp_path):
+    checkpoint, _, _ = trained
+    for run in ("unet-none", "unet-copy"):
+        (tmp_path / run / "checkpoints").mkdir(parents=True)
+        shutil.copy(checkpoint, tmp_path / run / "checkpoints" / "best.ckpt")
+    cfg = compose_config(f"evaluate.runs_dir={tmp_path}", f"evaluate.labels_dir={labelled_drive}", "split.block_m=4")
+    samples = read_manifest(split_dir / "test.csv")
+    rows = score_temporal(cfg, ["unet-none", "unet-copy"], samples)
+    frames = sum(len(b.frames) for b in held_out_blocks([s for s in samples if not s.mirrored], labelled_drive, 4.0))
+    assert list(rows) == ["unet-none", "unet-copy"] and rows["unet-none"].frames == frames
+    assert rows["unet-none"].method == "U-Net (none)" and rows["unet-none"].iou == rows["unet-copy"].iou  # same weights, same scores
+    assert all(0 <= getattr(rows["unet-none"], k) <= 1 for k in ("iou", "iou_filtered", "stability", "stability_filtered"))
+    assert score_temporal(compose_config("evaluate.temporal.enabled=false"), ["unet-none"], samples) is None
