@@ -1,8 +1,9 @@
 from __future__ import annotations
 
+import os
 import shutil
 import sqlite3
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -12,6 +13,22 @@ from offroad_path.config import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 KITTI_SNIPPET = ROOT.parent / "shared" / "data" / "kitti_seq1"
+
+
+@pytest.fixture(autouse=True)
+def restore_threads() -> Iterator[None]:
+    """Stages run in this process set its threads (offroad_path.utils.threads): each test starts as the session did."""
+    import cv2
+    import torch
+
+    saved = torch.get_num_threads(), cv2.getNumThreads(), os.environ.get("OMP_NUM_THREADS")
+    yield
+    torch.set_num_threads(saved[0])
+    cv2.setNumThreads(saved[1])
+    if saved[2] is None:
+        os.environ.pop("OMP_NUM_THREADS", None)
+    else:
+        os.environ["OMP_NUM_THREADS"] = saved[2]
 
 
 @pytest.fixture(scope="session")

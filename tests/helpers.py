@@ -75,13 +75,27 @@ def git(repo: Path, *args: str) -> None:
     subprocess.run(["git", *args], cwd=repo, env={**os.environ, **GIT_IDENTITY}, check=True, capture_output=True)
 
 
-def dvc(repo: Path, *args: str) -> str:
+def _dvc_command(repo: Path, *args: str) -> dict:
     env = {**os.environ, **GIT_IDENTITY}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"  # `python` in dvc.yaml is this one
     env["PYTHONPATH"] = str(repo / "src")  # the copy's code, not the installed checkout's
-    run = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=repo, env=env, capture_output=True, text=True)
+    return {"args": [sys.executable, "-m", "dvc", *args], "cwd": repo, "env": env, "text": True}
+
+
+def dvc(repo: Path, *args: str) -> str:
+    run = subprocess.run(**_dvc_command(repo, *args), capture_output=True)
     assert run.returncode == 0, run.stdout + run.stderr
     return run.stdout
+
+
+def dvc_at_once(repos: list[Path], *args: str) -> list[str]:
+    """The same dvc command in several repositories at the same time (their stages are mostly
+    single-threaded start-up: two at once take little longer than one)."""
+    runs = [subprocess.Popen(**_dvc_command(repo, *args), stdout=subprocess.PIPE, stderr=subprocess.PIPE) for repo in repos]
+    outputs = [run.communicate() for run in runs]
+    for run, (out, err) in zip(runs, outputs, strict=True):
+        assert run.returncode == 0, out + err
+    return [out for out, _ in outputs]
 
 
 def tiny_repo(repo: Path) -> Path:
@@ -102,6 +116,9 @@ def tiny_repo(repo: Path) -> Path:
     preset["steering"] = {"max_epochs": 1}
     preset["evaluate"] = {"temporal": {"enabled": False}}  # run three times here; tests/test_temporal.py scores it once
     laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
+    primary = repo / "conf" / "config.yaml"  # one thread per stage: two pipelines run at once (tests/test_pipeline_dvc.py)
+    primary.write_text(primary.read_text().replace("\nthreads: all\n", "\nthreads: 1\n"))
+    assert "\nthreads: 1\n" in primary.read_text()
     (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
     git(repo, "init", "-q")
     subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)

@@ -115,6 +115,11 @@ def test_predict_runs_the_exported_model_like_the_checkpoint(compose_config, tra
     predict(compose_config, folder, tmp_path / "onnx", f"predict.checkpoint={onnx}")
     a, b = (cv2.imread(str(tmp_path / k / "confidence" / "000000.png"), cv2.IMREAD_GRAYSCALE).astype(int) for k in ("torch", "onnx"))
     assert np.abs(a - b).max() <= 1
+    # predict.threads: the count it asks for, the same confidence (threads split the work, not the sums)
+    one = predict(compose_config, folder, tmp_path / "one", f"predict.checkpoint={onnx}", "predict.threads=1")
+    assert one["threads"] == 1 and torch.get_num_threads() == 1 and cv2.getNumThreads() == 1
+    c = cv2.imread(str(tmp_path / "one" / "confidence" / "000000.png"), cv2.IMREAD_GRAYSCALE).astype(int)
+    assert np.array_equal(b, c)
 
 
 @pytest.mark.parametrize(("make", "message"), [

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from offroad_path.postprocessing import PostprocessParams, postprocess
-from offroad_path.postprocessing.filter import nearest_to_bottom_centre
+from offroad_path.postprocessing.filter import blur, nearest_to_bottom_centre
 
 H, W = 96, 160
 NEAR = np.full((H, W), 5.0, np.float32)  # every pixel 5 m away: the depth mask keeps all
@@ -17,7 +17,43 @@ PAPER = PostprocessParams(max_depth_m=20.0, sigma=6.0, delta=0.025, use_depth=Tr
 
 
 def test_the_default_config_holds_the_papers_values(compose_config):
-    assert PostprocessParams.from_config(compose_config().postprocess) == PAPER
+    params = PostprocessParams.from_config(compose_config().postprocess)
+    assert replace(params, blur_scale=1) == PAPER and params.blur_scale == 2  # the blur at half resolution, bounded below
+
+
+def network_like_map(seed: int, h: int = 288, w: int = 512) -> tuple[np.ndarray, np.ndarray]:
+    """A confidence map as the laptop networks give it (a 128 x 72 output upsampled bilinearly),
+    and stereo depth with a sharp far band across it, where the depth mask cuts the map."""
+    rng = np.random.default_rng(seed)
+    coarse = cv2.GaussianBlur(rng.random((72, 128)).astype(np.float32), (0, 0), 1.5) ** 2
+    confidence = np.clip(cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR) * 2 - 0.3, 0, 1).astype(np.float32)
+    depth = np.full((h, w), 8.0, np.float32)
+    depth[: h // 3] = 40.0  # beyond D: zeroed before the blur, an edge of full height
+    depth[h // 3 :, : w // 5] = 0.0  # no stereo match: kept, as the paper does
+    return confidence, depth
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_half_resolution_blur_stays_within_bounds_of_the_exact_one(seed):
+    confidence, depth = network_like_map(seed)
+    exact = postprocess(confidence, depth, PAPER)
+    fast = postprocess(confidence, depth, replace(PAPER, blur_scale=2))
+    assert 0 < np.abs(fast - exact).max() < 0.03  # the same bound the laptop test maps met
+    flipped = ((fast > 0.5) != (exact > 0.5)).mean()
+    assert flipped < 2e-4  # of the thresholded path, a few pixels along its edge
+    # The blur alone, on the smooth map before the depth mask: the image border is the worst place
+    # (the low-resolution reflection differs there); inside, the two agree to 1e-3.
+    difference = np.abs(blur(confidence, 6.0, 2) - blurred(confidence))
+    assert difference.max() < 0.02 and difference[20:-20, 20:-20].max() < 1e-3
+
+
+def test_small_or_odd_sized_maps_and_narrow_blurs_get_the_exact_blur():
+    rng = np.random.default_rng(0)
+    odd = rng.random((95, 161)).astype(np.float32)
+    assert np.array_equal(blur(odd, 6.0, 2), blurred(odd))
+    even = rng.random((96, 160)).astype(np.float32)
+    assert np.array_equal(blur(even, 2.0, 2), blurred(even, 2.0))  # sigma 2 at half resolution would be under a pixel
+    assert not np.array_equal(blur(even, 6.0, 2), blurred(even))
 
 
 def blurred(c: np.ndarray, sigma: float = 6.0) -> np.ndarray:

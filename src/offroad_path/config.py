@@ -17,10 +17,12 @@ from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from offroad_path.utils.rules import at_least, between, each, numbers, one_of, positive, rule, setting, validate
+from offroad_path.utils.rules import Rule, at_least, between, each, numbers, one_of, positive, rule, setting, validate
+from offroad_path.utils.threads import is_thread_setting
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 IMAGE_SIZE = between(16, 8192)  # pixels of an image side
+THREADS = {"rule": Rule(is_thread_setting, "must be all, free or a whole number >= 1")}  # offroad_path.utils.threads
 PRETRAININGS = ("none", "segmentation", "imagenet")
 BALANCES = ("none", "oversample", "weighted")  # steering.balance (offroad_path.steering.balance)
 
@@ -236,6 +238,7 @@ class DataConfig:
     augment: bool = MISSING
     jitter: float = setting(between(0, 1))  # brightness, contrast and saturation jitter
     min_scale: float = setting(between(0, 1, low_open=True))  # random resized crop keeps at least this fraction of the image
+    cache_mb: float = setting(at_least(0))  # decoded samples kept in memory per loader process (0: decode every epoch)
 
 
 @dataclass
@@ -252,6 +255,7 @@ class ModelConfig:
     weight_decay: float = setting(at_least(0))
     imagenet_weights: str = MISSING  # torchvision VGG16(-BN) file that pretraining=imagenet reads for this network
     paper_steps: int = setting(at_least(1))  # SGD iterations the paper trained it for (experiment=paper caps training there)
+    channels_last: bool = MISSING  # the memory format train.channels_last takes by default (measured per network)
 
 
 @dataclass
@@ -291,7 +295,7 @@ class TrainConfig:
     seed: int = MISSING
     resume: bool = MISSING  # continue an interrupted run from its last.ckpt (in .resume/ beside out_dir); false: start afresh
     sample_images: int = setting(at_least(0))  # validation predictions logged to MLflow each epoch
-    channels_last: bool = MISSING  # channels-last memory format (faster with GPU tensor cores)
+    channels_last: bool = MISSING  # channels-last memory format (default: the model file's choice)
     max_steps: int = setting(rule(lambda v: v == -1 or v >= 1, "must be -1 (no cap) or an integer >= 1"))  # SGD steps, besides max_epochs
 
 
@@ -304,6 +308,7 @@ class PostprocessConfig:
     delta: float = setting(between(0, 1, high_open=True))  # confidence below this is set to 0
     use_depth: bool = MISSING
     unknown_depth: str = setting(one_of(("keep", "drop")))  # pixels without stereo depth: keep (the paper) or zero
+    blur_scale: int = setting(between(1, 8))  # the blur runs at 1/blur_scale of the resolution (1: exact)
 
 
 @dataclass
@@ -382,6 +387,7 @@ class PredictConfig:
     # Images larger than this are refused from their header, before decoding (8K is 33 million).
     max_image_pixels: int = setting(at_least(1))
     device: str = MISSING
+    threads: str = setting(THREADS)  # free (default): the cores not busy when predict starts
 
 
 @dataclass
@@ -427,6 +433,7 @@ class Config:
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = MISSING
     optimized_metric: str | None = MISSING  # the stage's metric a Hydra sweeper optimises (hparams_search)
+    threads: str = setting(THREADS)  # torch, OpenCV and OpenMP threads of a stage's process: all, free or a number
 
 
 def validate_config(cfg) -> None:

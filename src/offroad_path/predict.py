@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -25,25 +28,39 @@ from offroad_path.inference.sources import open_source
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
 from offroad_path.utils.cli import hydra_stage
+from offroad_path.utils.threads import set_threads
 from offroad_path.utils.tracking import tracking_uri
 from offroad_path.viz import overlay
 
 log = logging.getLogger("offroad_path.predict")
 DEFAULT_FPS = 10.0
+WRITES_AHEAD = 4  # frames the writer thread may fall behind (their images wait in memory)
+
+
+def write_frame(tmp: Path, name: str, confidence: np.ndarray, shown: np.ndarray, video: cv2.VideoWriter | None) -> None:
+    """One frame's outputs: confidence/NAME.png, overlay/NAME.png and the video's next frame."""
+    cv2.imwrite(str(tmp / "confidence" / f"{name}.png"), np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
+    shown = cv2.cvtColor(shown, cv2.COLOR_RGB2BGR)
+    cv2.imwrite(str(tmp / "overlay" / f"{name}.png"), shown)
+    if video is not None:
+        video.write(shown)
 
 
 def run_predict(cfg: DictConfig) -> dict:
     p, pp = cfg.predict, cfg.postprocess
     inputs = [p.input] + ([p.checkpoint] if p.checkpoint else [])
     check_output_dir(p.out_dir, "predict.out_dir", inputs)
-    model = load_model(p.checkpoint, p.run_id, tracking_uri(cfg.mlflow), p.device)
+    threads = set_threads(p.threads)  # "free" by default: a busy machine gets fewer threads, not a collapse
+    model = load_model(p.checkpoint, p.run_id, tracking_uri(cfg.mlflow), p.device, threads)
     source = open_source(p.input, cfg.label.disparity if p.postprocess else None, p.max_frames, p.max_image_pixels)
     fps = p.video_fps or source.fps or DEFAULT_FPS
     frames, model_seconds, start = 0, 0.0, time.perf_counter()
-    with atomic_directory(p.out_dir, "predict", inputs, key="predict.out_dir") as tmp:
+    # Encoding the PNGs and the video took as long as the network: a writer thread does it (OpenCV
+    # lets go of the GIL) while the next frame is read and run; one thread keeps the video in order.
+    with atomic_directory(p.out_dir, "predict", inputs, key="predict.out_dir") as tmp, ThreadPoolExecutor(1) as writer:
         (tmp / "confidence").mkdir()
         (tmp / "overlay").mkdir()
-        video = None
+        video, pending = None, deque()
         for frame in tqdm(source.frames, total=source.count, unit="frame", desc=f"predict {source.kind}"):
             t0 = time.perf_counter()
             (confidence,) = model([frame.image])
@@ -52,21 +69,23 @@ def run_predict(cfg: DictConfig) -> dict:
                 params = replace(PostprocessParams.from_config(pp), use_depth=pp.use_depth and frame.depth is not None)
                 confidence = postprocess(confidence, frame.depth, params)
             shown = overlay(frame.image, confidence > p.threshold, outline=False)
-            cv2.imwrite(str(tmp / "confidence" / f"{frame.name}.png"), np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
-            cv2.imwrite(str(tmp / "overlay" / f"{frame.name}.png"), cv2.cvtColor(shown, cv2.COLOR_RGB2BGR))
-            if source.kind != "folder":
-                if video is None:
-                    video = cv2.VideoWriter(str(tmp / "overlay.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), fps, shown.shape[1::-1])
-                    if not video.isOpened():
-                        raise ValueError(f"{tmp / 'overlay.mp4'}: OpenCV cannot write an MP4 here")
-                video.write(cv2.cvtColor(shown, cv2.COLOR_RGB2BGR))
+            if source.kind != "folder" and video is None:
+                video = cv2.VideoWriter(str(tmp / "overlay.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), fps, shown.shape[1::-1])
+                if not video.isOpened():
+                    raise ValueError(f"{tmp / 'overlay.mp4'}: OpenCV cannot write an MP4 here")
+            pending.append(writer.submit(write_frame, tmp, frame.name, confidence, shown, video))
+            if len(pending) > WRITES_AHEAD:
+                pending.popleft().result()  # a failed write stops the run here
             frames += 1
+        for write in pending:
+            write.result()
         if video is not None:
             video.release()
     seconds = time.perf_counter() - start
-    summary = {"frames": frames, "seconds": seconds, "fps": frames / seconds, "model_fps": frames / max(model_seconds, 1e-9)}
+    summary = {"frames": frames, "threads": threads, "seconds": seconds, "fps": frames / seconds,
+               "model_fps": frames / max(model_seconds, 1e-9)}  # fmt: skip
     print(f"{frames} frames in {seconds:.1f} s: {summary['fps']:.1f} frames/s end to end, {summary['model_fps']:.1f} frames/s "
-          f"in the model ({type(model).__name__}, {model.width} x {model.height}); written to {p.out_dir}")  # fmt: skip
+          f"in the model ({type(model).__name__}, {model.width} x {model.height}, {threads} threads); written to {p.out_dir}")  # fmt: skip
     return summary
 
 

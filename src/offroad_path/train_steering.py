@@ -47,7 +47,7 @@ def train_steering(cfg: DictConfig) -> dict:
     check_output_dir(s.out_dir, "steering.out_dir", inputs)
     L.seed_everything(s.seed, workers=True)
     parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror)
-    data = SteeringDataModule(parts, s)
+    data = SteeringDataModule(parts, s, cfg.data.cache_mb)
     task = SteeringTask.from_config(s)
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs")
     identity = {

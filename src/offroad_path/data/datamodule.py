@@ -18,7 +18,8 @@ class OffroadDataModule(L.LightningDataModule):
     # Each argument is a hyper-parameter saved flat in the checkpoint (predict reads the input size
     # from it); build one from config with from_config.
     def __init__(self, *, split_dir: str, target: str, width: int, height: int, batch_size: int,  # noqa: PLR0913
-                 num_workers: int, pin_memory: bool, augment: bool, jitter: float, min_scale: float, seed: int):  # fmt: skip
+                 num_workers: int, pin_memory: bool, augment: bool, jitter: float, min_scale: float, seed: int,
+                 cache_mb: float = 0):  # fmt: skip
         super().__init__()
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
         self.split_dir = Path(split_dir)
@@ -27,7 +28,7 @@ class OffroadDataModule(L.LightningDataModule):
     @classmethod
     def from_config(cls, data: DictConfig, target: str, seed: int) -> OffroadDataModule:
         """From the `data` config node (conf/data/default.yaml) for target 'path' or 'semantic'."""
-        settings = ("width", "height", "batch_size", "num_workers", "pin_memory", "augment", "jitter", "min_scale")
+        settings = ("width", "height", "batch_size", "num_workers", "pin_memory", "augment", "jitter", "min_scale", "cache_mb")
         return cls(split_dir=data.split_dir, target=target, **{k: data[k] for k in settings}, seed=seed)
 
     def setup(self, stage: str | None = None) -> None:
@@ -40,7 +41,7 @@ class OffroadDataModule(L.LightningDataModule):
         hp = self.hparams
         augmentation = Augmentation(hp.jitter, hp.min_scale) if train and hp.augment else None
         transform = transforms(hp.width, hp.height, augmentation, seed=hp.seed)
-        dataset = ManifestDataset(self.samples[name], hp.target, transform)
+        dataset = ManifestDataset(self.samples[name], hp.target, transform, hp.cache_mb)
         sampler = EpochSampler(len(dataset), hp.seed) if train else None
         return DataLoader(dataset, batch_size=hp.batch_size, sampler=sampler, drop_last=train and len(dataset) > hp.batch_size,
                           num_workers=hp.num_workers, pin_memory=hp.pin_memory, persistent_workers=hp.num_workers > 0)  # fmt: skip

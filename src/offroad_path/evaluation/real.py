@@ -67,7 +67,7 @@ def score_real(runs: list[str], runs_dir: Path, frames: RealFrames, prior: np.nd
     rows = {}
     for run in runs:
         model = TorchModel(runs_dir / run / "checkpoints" / "best.ckpt")
-        confidence = np.stack([model([image])[0] for image in frames.images])
+        confidence = model.predict_all(frames.images)
         name, pretraining = split_run_name(run)
         rows[run] = real_row(f"{network_name(name)} ({pretraining})", confidence > threshold, frames)
         log.info("%s on %s: IoU %.3f, against other frames' labels %.3f", run, frames.name, rows[run].iou, rows[run].non_corresponding_iou)

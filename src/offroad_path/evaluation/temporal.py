@@ -134,7 +134,7 @@ def score_temporal(cfg: DictConfig, runs: list[str], samples: list[Sample]) -> d
         model = TorchModel(Path(e.runs_dir) / run / "checkpoints" / "best.ckpt")
         raw, fused, steady, steady_fused = [], [], [], []
         for block in blocks:
-            confidence = np.stack([model([image])[0] for image in block.images])
+            confidence = model.predict_all(block.images)
             smooth = filtered(confidence, block, t.alpha)
             raw.append(confidence)
             fused.append(smooth)

@@ -17,24 +17,45 @@ from offroad_path.steering.balance import balance_weights
 from offroad_path.steering.frames import SteeringFrame
 
 
-def steering_transforms(width: int, height: int, jitter: float, seed: int) -> A.Compose:
-    """Resize and normalise; photometric jitter only, since a crop or a shift would change the angle."""
-    ops: list = [A.Resize(height, width)]
+def steering_transforms(jitter: float, seed: int) -> A.Compose:
+    """Photometric jitter only, since a crop or a shift would change the angle; then normalise.
+    (The resize to PilotNet's input comes before, once per frame: SteeringDataset.)"""
+    ops: list = []
     if jitter > 0:
         ops.append(A.ColorJitter(brightness=jitter, contrast=jitter, saturation=jitter, hue=0.02))
     return A.Compose([*ops, A.Normalize(), ToTensorV2()], seed=seed)
 
 
 class SteeringDataset(Dataset):
-    """Images and angles; with `loss_weights`, each item also carries its frame's weight in the loss."""
+    """Images and angles; with `loss_weights`, each item also carries its frame's weight in the loss.
+    Each frame is decoded and resized to (width, height) once and kept, read-only, up to cache_mb
+    (data.cache_mb): at PilotNet's 256 x 136 a frame is 104 KB, and decoding its 512 x 288 PNG
+    every epoch took a quarter of the epoch."""
 
-    def __init__(self, frames: list[SteeringFrame], transform: A.Compose, loss_weights: np.ndarray | None = None):
+    def __init__(self, frames: list[SteeringFrame], size: tuple[int, int], transform: A.Compose,
+                 loss_weights: np.ndarray | None = None, cache_mb: float = 0):  # fmt: skip
         self.frames = frames
+        self.size = size  # (width, height)
         self.transform = transform
         self.loss_weights = loss_weights
+        self.cache_bytes = int(cache_mb * 2**20)
+        self._resized: dict[int, np.ndarray] = {}
 
     def __len__(self) -> int:
         return len(self.frames)
+
+    def resized(self, i: int) -> np.ndarray:
+        """Frame i's RGB image at (width, height), mirrored where the frame says so."""
+        if (image := self._resized.get(i)) is None:
+            frame = self.frames[i]
+            image = cv2.cvtColor(read(frame.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+            if frame.mirrored:
+                image = mirror(image)
+            image = cv2.resize(image, self.size, interpolation=cv2.INTER_LINEAR)  # albumentations' Resize, exactly
+            if (len(self._resized) + 1) * image.nbytes <= self.cache_bytes:
+                image.flags.writeable = False
+                self._resized[i] = image
+        return image
 
     def __getitem__(self, key: int | tuple[int, int]) -> dict:
         """key: an index, or (index, augmentation seed) from EpochSampler (see offroad_path.data.dataset)."""
@@ -42,10 +63,7 @@ class SteeringDataset(Dataset):
         if seed is not None:
             self.transform.set_random_seed(seed)
         frame = self.frames[i]
-        image = cv2.cvtColor(read(frame.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-        if frame.mirrored:
-            image = mirror(image)
-        item = {"image": self.transform(image=image)["image"], "steering": torch.tensor(frame.steering, dtype=torch.float32)}
+        item = {"image": self.transform(image=self.resized(i))["image"], "steering": torch.tensor(frame.steering, dtype=torch.float32)}
         if self.loss_weights is not None:
             item["weight"] = torch.tensor(self.loss_weights[i], dtype=torch.float32)
         return item
@@ -53,17 +71,18 @@ class SteeringDataset(Dataset):
 
 class SteeringDataModule(L.LightningDataModule):
     """train / val / test loaders of the steering frames, by the `steering` settings (width, height,
-    batch_size, jitter, seed, balance: see offroad_path.steering.balance)."""
+    batch_size, jitter, seed, balance: see offroad_path.steering.balance), each keeping up to
+    cache_mb of resized frames."""
 
-    def __init__(self, parts: dict[str, list[SteeringFrame]], s: DictConfig):
+    def __init__(self, parts: dict[str, list[SteeringFrame]], s: DictConfig, cache_mb: float = 0):
         super().__init__()
-        self.parts, self.s = parts, s
+        self.parts, self.s, self.cache_mb = parts, s, cache_mb
 
     def _loader(self, part: str, train: bool) -> DataLoader:
         s = self.s
-        transform = steering_transforms(s.width, s.height, s.jitter if train else 0.0, s.seed)
+        transform = steering_transforms(s.jitter if train else 0.0, s.seed)
         sampling, loss = balance_weights(np.array([f.steering for f in self.parts[part]]), s.balance) if train else (None, None)
-        dataset = SteeringDataset(self.parts[part], transform, loss)
+        dataset = SteeringDataset(self.parts[part], (s.width, s.height), transform, loss, self.cache_mb)
         return DataLoader(dataset, s.batch_size, sampler=EpochSampler(len(dataset), s.seed, weights=sampling) if train else None)
 
     def train_dataloader(self) -> DataLoader:

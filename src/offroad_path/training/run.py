@@ -114,7 +114,9 @@ class StampConfig(L.Callback):
 
 
 # Settings that change how long a run goes on, not what it computes: a longer run resumes a shorter one.
-LENGTH_SETTINGS = {"max_epochs", "max_steps", "fast_dev_run", "log_every_n_steps"}
+LENGTH_SETTINGS = {"max_epochs", "fast_dev_run", "log_every_n_steps"}  # of conf/trainer (max_steps lives in train and pretrain)
+# Settings of the data loader that change its speed, not the samples it gives.
+LOADER_SETTINGS = {"num_workers", "pin_memory", "cache_mb"}
 
 
 @dataclass
@@ -274,7 +276,7 @@ def fit_segmentation(
         log.info("initialised %d parameter tensors from %s pretraining", len(loaded), pretraining)
     identity = {
         "stage": stage, "target": target, "seed": cfg.train.seed,
-        "data": {k: v for k, v in OmegaConf.to_container(cfg.data, resolve=True).items() if k not in ("num_workers", "pin_memory")},
+        "data": {k: v for k, v in OmegaConf.to_container(cfg.data, resolve=True).items() if k not in LOADER_SETTINGS},
         "model": OmegaConf.to_container(cfg.model, resolve=True),
         "pretraining": OmegaConf.to_container(cfg.pretraining, resolve=True) if stage == "train" else None,
         "trainer": {k: v for k, v in OmegaConf.to_container(cfg.trainer, resolve=True).items() if k not in LENGTH_SETTINGS},

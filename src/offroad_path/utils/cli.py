@@ -17,6 +17,7 @@ from omegaconf.errors import MissingMandatoryValue
 from offroad_path.sequence.errors import SequenceError
 from offroad_path.utils.atomic import remove_unfinished
 from offroad_path.utils.parallel import stop_workers
+from offroad_path.utils.threads import set_threads
 
 log = logging.getLogger("offroad_path")
 
@@ -60,11 +61,12 @@ def objective(result: Any, metric: str | None) -> float | None:
 
 def run_stage(stage: Callable[[DictConfig], Any], cfg: DictConfig) -> Any:
     """What a stage's command does with its composed config: check every value against the schemas'
-    rules, run, and turn bad input into one line and exit status 2."""
+    rules, set the process's threads (`threads`), run, and turn bad input into one line and exit status 2."""
     from offroad_path.config import validate_config
 
     with clear_errors():
         validate_config(cfg)
+        set_threads(cfg.threads)
         return stage(cfg)
 
 

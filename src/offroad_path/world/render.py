@@ -116,7 +116,7 @@ def _march(terrain: Terrain, origin: tuple, idx: np.ndarray, per_ray: list[np.nd
         for level, reach_flat in enumerate(per_ray[6:]):
             headroom = -y - terrain.max_within_at_cells(level, fx, fz)
             reach = np.minimum(reach_flat, headroom * sink)
-            step = np.where(headroom > 0, np.maximum(step, reach), step)
+            np.maximum(step, reach, out=step, where=headroom > 0)
         t_prev, c_prev = t, c
         t = t + step
         alive &= ~crossed & (t < limit)
@@ -144,10 +144,12 @@ def _refine(clearance, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray, c: tupl
             mid = lo + np.where(denom > 0, c_lo / np.where(denom > 0, denom, 1.0), 0.5) * (hi - lo)
         c = clearance(mid, dx, dy, dz)
         above = c > 0
-        lo = np.where(above, mid, lo)
-        c_lo = np.where(above, c, c_lo)
-        hi = np.where(above, hi, mid)
-        c_hi = np.where(above, c_hi, c)
+        under = ~above
+        # In place: the same values as np.where, without four new arrays per iteration.
+        np.copyto(lo, mid, where=above)
+        np.copyto(c_lo, c, where=above)
+        np.copyto(hi, mid, where=under)
+        np.copyto(c_hi, c, where=under)
     denom = c_lo - c_hi
     frac = np.where(denom > 0, c_lo / np.where(denom > 0, denom, 1.0), 0.0)
     return lo + frac * (hi - lo)
@@ -279,9 +281,17 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     sky_dirs = dirs[sky]
     rgb[sky] = _sky_colour(world, sky_dirs / np.linalg.norm(sky_dirs, axis=1, keepdims=True))
 
-    image = GAMMA[(np.clip(rgb, 0.0, 1.0) * (len(GAMMA) - 1) + 0.5).astype(np.int32)]
     shape = (camera.height, camera.width)
-    return View(image=image.reshape(*shape, 3), depth=t.reshape(shape), semantic=semantic.reshape(shape))
+    return View(image=_gamma_encode(rgb).reshape(*shape, 3), depth=t.reshape(shape), semantic=semantic.reshape(shape))
+
+
+def _gamma_encode(rgb: np.ndarray) -> np.ndarray:
+    """Linear light (N, 3) float64 to 8-bit, through the GAMMA table; rgb is overwritten (in place:
+    the same values as clip, scale and round into new arrays, without three image-sized temporaries)."""
+    np.clip(rgb, 0.0, 1.0, out=rgb)
+    rgb *= len(GAMMA) - 1
+    rgb += 0.5
+    return GAMMA[rgb.astype(np.int32)]
 
 
 def _detail(world: World, points: np.ndarray, cls: np.ndarray, footprint: np.ndarray, ground: np.ndarray) -> np.ndarray:
