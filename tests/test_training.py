@@ -64,6 +64,18 @@ def test_resume_continues_the_step_count_and_mlflow_has_the_run(compose_config, 
     assert {"samples/epoch_000.png", "checkpoints/best.ckpt", "metrics.json"} <= stored
 
 
+def test_a_run_that_stopped_early_stays_stopped_when_run_again(tiny_config, tmp_path):
+    # min_delta 1: no epoch improves on the first, so early stopping ends the run after 1 + patience epochs.
+    overrides = ("model=fcn", "trainer.max_epochs=6", "callbacks.early_stopping.patience=1", "+callbacks.early_stopping.min_delta=1.0",
+                 "mlflow.enabled=false")  # fmt: skip
+    first = train(tiny_config(tmp_path, *overrides))
+    assert first["epochs"] == 2
+    published = (tmp_path / "run" / "metrics.json").read_bytes(), (tmp_path / "run" / "checkpoints" / "best.ckpt").read_bytes()
+    again = train(tiny_config(tmp_path, *overrides))  # resumes from the finished run's last.ckpt
+    assert again == first  # no extra epoch: the same steps, epochs and test metrics
+    assert ((tmp_path / "run" / "metrics.json").read_bytes(), (tmp_path / "run" / "checkpoints" / "best.ckpt").read_bytes()) == published
+
+
 def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path, tiny_overrides):
     db = tmp_path / "mlflow.db"
     overrides = [*tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path}/runs/${{model.name}}",

@@ -1,9 +1,10 @@
 """How the colour and depth PNGs of a sequence are written (synthesize and ingest).
 
-zlib's Huffman coding alone of the SUB filter's differences: on a 512 x 288 rendered colour image
-it encodes in a third of the time of zlib level 3 (3.2 against 10.3 ms) and decodes a fifth
-faster, for 6 % more bytes (benchmarks/README.md); against zlib level 1 in ingest, 5.7 against
-10.6 ms and 4 % smaller. The pixels are the same either way."""
+zlib's Huffman coding alone of the SUB filter's differences: a 512 x 288 rendered colour image
+encodes in a third of zlib level 3's time (3.6 against 11.2 ms), about half of level 1's (6.9 ms)
+and decodes 30 % faster (2.1 against 2.9 ms), for 6 % more bytes than level 3; 16-bit depth
+encodes 2.5x faster for 48 % more bytes (`benchmarks/png_speed.py`). The pixels are the same either
+way. Semantic maps, of a few classes, stay at level 3 (4 KiB against 19)."""
 
 import cv2
 

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from hydra.utils import instantiate
-from lightning.pytorch.callbacks import ModelCheckpoint
+from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint
 from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
@@ -101,6 +101,16 @@ def seed_everything_quietly(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed % 2**32)
     torch.manual_seed(seed)
+
+
+class StayStopped(L.Callback):
+    """A run that early stopping ended stays ended when it is run again: resuming from its last.ckpt
+    would otherwise train one more epoch (Lightning restores the callback's counters, not its
+    decision) and change epochs, steps and possibly the best weights."""
+
+    def on_train_start(self, trainer: L.Trainer, task: L.LightningModule) -> None:
+        if any(isinstance(c, EarlyStopping) and c.stopped_epoch > 0 for c in trainer.callbacks):
+            trainer.should_stop = True
 
 
 class StampConfig(L.Callback):
@@ -230,7 +240,8 @@ def fit(
     trainer: L.Trainer = instantiate(
         spec.trainer, max_epochs=spec.max_epochs, max_steps=spec.max_steps, logger=logger if logger is not None else False,
         default_root_dir=work, **without_validation,
-        callbacks=[*checkpoints, *callbacks_from(spec, task), SeedEachEpoch(spec.seed), StampConfig(key), *spec.extra_callbacks],
+        callbacks=[*checkpoints, *callbacks_from(spec, task), SeedEachEpoch(spec.seed), StayStopped(), StampConfig(key),
+                   *spec.extra_callbacks],
         plugins=[AtomicCheckpointIO()], enable_progress_bar=False,
     )  # fmt: skip
     trainer.fit(task, data, ckpt_path=resume, weights_only=True)

@@ -27,7 +27,7 @@ from offroad_path.world.scene import build_world
 log = logging.getLogger(__name__)
 
 DEPTH_MAX_MM = 65535
-SEMANTIC_PNG = [cv2.IMWRITE_PNG_COMPRESSION, 3]  # few classes: zlib's matching makes these 4 KiB, FAST_PNG 19 KiB
+SEMANTIC_PNG = [cv2.IMWRITE_PNG_COMPRESSION, 3]  # few classes: zlib level 3 makes these 4 KiB, FAST_PNG 19 KiB
 
 
 def sequence_seed(master_seed: int, index: int) -> int:
