@@ -117,7 +117,7 @@ def tiny_repo(repo: Path) -> Path:
     preset["evaluate"] = {"temporal": {"enabled": False}}  # run three times here; tests/test_temporal.py scores it once
     laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
     primary = repo / "conf" / "config.yaml"  # one thread per stage: two pipelines run at once (tests/test_pipeline_dvc.py)
-    primary.write_text(primary.read_text().replace("\nthreads: all\n", "\nthreads: 1\n"))
+    primary.write_text(primary.read_text().replace("\nthreads: 2\n", "\nthreads: 1\n"))
     assert "\nthreads: 1\n" in primary.read_text()
     (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
     git(repo, "init", "-q")
