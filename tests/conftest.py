@@ -10,9 +10,20 @@ import pytest
 from omegaconf import DictConfig
 
 from offroad_path.config import load_config
+from offroad_path.utils.threads import set_threads, usable_cores
 
 ROOT = Path(__file__).resolve().parents[1]
 KITTI_SNIPPET = ROOT.parent / "shared" / "data" / "kitti_seq1"
+# pytest-xdist runs the suite in one process per core (pyproject's addopts): each worker and the
+# stages it runs in-process get their share of the cores, so that workers never wait on each other's
+# threads. Stages started as commands keep their config's count (2), with OpenMP threads that sleep
+# rather than spin while they wait: two spinning 2-thread processes on 2 cores ran a training step
+# 15x slower, sleeping ones 1.9x (benchmarks/wait_policy.py).
+WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+WORKER_THREADS = max(1, usable_cores() // WORKERS)
+if WORKERS > 1:
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # read by a command's OpenMP when it starts
+    set_threads(WORKER_THREADS)
 
 
 @pytest.fixture(autouse=True)
@@ -33,8 +44,11 @@ def restore_threads() -> Iterator[None]:
 
 @pytest.fixture(scope="session")
 def compose_config() -> Callable[..., DictConfig]:
-    """The project's Hydra config, composed exactly as the stages compose it, with overrides."""
-    return load_config
+    """The project's Hydra config, composed exactly as the stages compose it, with overrides (and,
+    under pytest-xdist, the worker's share of the cores as `threads`, unless a test sets it)."""
+    if WORKERS == 1:
+        return load_config
+    return lambda *overrides: load_config(f"threads={WORKER_THREADS}", *overrides)
 
 
 @pytest.fixture(scope="session")
