@@ -26,6 +26,17 @@ if WORKERS > 1:
     set_threads(WORKER_THREADS)
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The slow tests first, longest first: a pytest-xdist worker that got the longest one last
+    would run on alone while the others wait."""
+
+    def seconds(item: pytest.Item) -> float:
+        slow = item.get_closest_marker("slow")
+        return slow.kwargs.get("seconds", 1.0) if slow else 0.0
+
+    items.sort(key=seconds, reverse=True)  # stable: the rest keep pytest's order
+
+
 @pytest.fixture(autouse=True)
 def restore_threads() -> Iterator[None]:
     """Stages run in this process set its threads (offroad_path.utils.threads): each test starts as the session did."""

@@ -69,7 +69,7 @@ def two_drives(drive, tmp_path_factory) -> Path:
     return recordings
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=45)
 def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_drives, tmp_path):
     def args(out: Path) -> list[str]:
         return ["offroad_path.label", f"label.in_dir={two_drives}", f"label.out_dir={out / 'labels'}",
@@ -109,7 +109,7 @@ def saved_epochs(out: Path) -> int:
     return 0
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=115)
 def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(split_dir, tiny_overrides, tmp_path):
     def args(out: Path) -> list[str]:
         return ["offroad_path.train", *tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={out / 'run'}", "model=unet",

@@ -34,7 +34,7 @@ def lock_entries(repo: Path) -> dict:
     return yaml.safe_load((repo / "dvc.lock").read_text())["stages"]
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=240)
 def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     # A clone elsewhere, deeper, at the same time (on the U-Net column of the grid only, to save
     # the suite's time), must reproduce every stage's hashes: no output depends on the path.
