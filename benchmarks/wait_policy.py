@@ -10,6 +10,9 @@ sleep at once; the test suite's setting, and the README's advice beside other wo
 - alone, on an idle machine;
 - two such processes at once (two stages, or a stage beside the test suite);
 - beside a process multiplying matrices on torch's default threads and policy (someone else's job).
+
+The last column is a hash of the weights after the warm-up and timed steps: the same in every
+case of a row, and the same across rows, since waiting does not change the arithmetic.
 """
 
 from __future__ import annotations
@@ -24,17 +27,19 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 BUSY = "import torch\nx = torch.randn(1024, 1024)\nwhile True:\n    x = (x @ x).clamp(-1, 1)\n"
 STEPS = """
-import sys, torch
+import hashlib, sys, torch
 sys.path.insert(0, {here!r})
 from training_step import step_ms
+from offroad_path.config import load_config
 from offroad_path.models import build_model
 torch.set_num_threads({threads})
 torch.manual_seed(0)
 x, y = torch.randn(6, 3, 72, 128), torch.randint(0, 2, (6, 72, 128))
 net = build_model({model!r}, 2, 0.25)
-if {model!r} == "segnet":  # the layout its train stage uses (model.channels_last)
+if load_config("model={model}").model.channels_last:  # the layout its train stage uses
     net, x = net.to(memory_format=torch.channels_last), x.contiguous(memory_format=torch.channels_last)
 print(step_ms(net, x, y, {steps}))
+print(hashlib.sha256(b"".join(p.detach().numpy().tobytes() for p in net.parameters())).hexdigest()[:12])
 """
 
 
@@ -56,9 +61,11 @@ def start(policy: dict[str, str], args: argparse.Namespace) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True)
 
 
-def ms(process: subprocess.Popen) -> float:
+def ms(process: subprocess.Popen) -> tuple[float, str]:
+    """(ms per step, SHA-256 of the weights after every step) of a process from start()."""
     out, _ = process.communicate()
-    return float(out.strip().splitlines()[-1])
+    step, weights = out.strip().splitlines()[-2:]
+    return float(step), weights
 
 
 def main() -> None:
@@ -69,11 +76,11 @@ def main() -> None:
     parser.add_argument("--policies", default=",".join(POLICIES), help="comma-separated names of POLICIES")
     args = parser.parse_args()
     print(f"{args.model}, 128 x 72, batch 6, {args.threads} threads: ms per SGD step ({os.cpu_count()} cores)")
-    print("| OpenMP setting | alone | two at once (each) | beside a busy torch process |")
-    print("| --- | --- | --- | --- |")
+    print("| OpenMP setting | alone | two at once (each) | beside a busy torch process | weights after the steps (SHA-256) |")
+    print("| --- | --- | --- | --- | --- |")
     for name in args.policies.split(","):
         policy = POLICIES[name]
-        alone = ms(start(policy, args))
+        alone, weights = ms(start(policy, args))
         twins = [start(policy, args) for _ in range(2)]
         pair = [ms(p) for p in twins]
         busy = subprocess.Popen([sys.executable, "-c", BUSY], env=clean_env())
@@ -83,7 +90,9 @@ def main() -> None:
         finally:
             busy.kill()
             busy.wait()
-        print(f"| {name} | {alone:.1f} | {max(pair):.1f} | {beside:.1f} |", flush=True)
+        runs = {weights, beside[1], *(w for _, w in pair)}
+        same = weights if len(runs) == 1 else "differ: " + ", ".join(sorted(runs))
+        print(f"| {name} | {alone:.1f} | {max(t for t, _ in pair):.1f} | {beside[0]:.1f} | {same} |", flush=True)
 
 
 if __name__ == "__main__":

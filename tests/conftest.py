@@ -18,7 +18,7 @@ KITTI_SNIPPET = ROOT.parent / "shared" / "data" / "kitti_seq1"
 # stages it runs in-process get their share of the cores, so that workers never wait on each other's
 # threads. Stages started as commands keep their config's count (2), with OpenMP threads that sleep
 # rather than spin while they wait: two spinning 2-thread processes on 2 cores ran a training step
-# 15x slower, sleeping ones 1.9x (benchmarks/wait_policy.py).
+# 4.7x to 15x slower, sleeping ones 1.5x to 1.9x (benchmarks/wait_policy.py).
 WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
 WORKER_THREADS = max(1, usable_cores() // WORKERS)
 if WORKERS > 1:

@@ -82,16 +82,20 @@ def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_dri
     assert labels > 10
 
     def written(out: Path, count: int) -> Callable[[], bool]:
-        """Ready once the run's temporary folder holds `count` labels: a point in the run's work,
-        whatever the machine's load (a signal timed from an earlier run missed under load)."""
-        return lambda: len(list(out.glob(".labels.tmp-*/*/label/*.png"))) >= count
+        """Ready once the run's temporary folder exists and holds `count` labels: a point in the
+        run's work, whatever the machine's load (a signal timed from an earlier run missed under load)."""
+
+        def ready() -> bool:
+            folders = list(out.glob(".labels.tmp-*"))
+            return bool(folders) and sum(len(list(f.glob("*/label/*.png"))) for f in folders) >= count
+
+        return ready
 
     # From just after the temporary folder appears to 60 % of the labels written.
     points = [(signal.SIGKILL, 0.0), (signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2), (signal.SIGTERM, 0.6)]
     for i, (how, share) in enumerate(points):
         out = tmp_path / f"run{i}"
-        ready = written(out, round(share * labels)) if share else lambda out=out: any(out.glob(".labels.tmp-*"))
-        interrupt(args(out), how, 0.0, ready=ready)
+        interrupt(args(out), how, 0.0, ready=written(out, round(share * labels)))
         if how == signal.SIGTERM:  # a stopped stage cleans up after itself
             assert not list(out.glob(".labels*"))
         finish(args(out))
