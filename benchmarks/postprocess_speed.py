@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from offroad_path.config import load_config
-from offroad_path.data.dataset import load_depth, load_labels
+from offroad_path.data.loading import load_depth, load_labels
 from offroad_path.data.manifest import read_predictions_manifest
 from offroad_path.postprocessing import PostprocessParams, postprocess
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from offroad_path.data.dataset import load_labels
+from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import prediction_name, read_manifest, read_predictions_manifest, write_predictions_manifest
 from offroad_path.evaluate import evaluate
 from offroad_path.postprocess import run_postprocess

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+import torch
+from torchmetrics.classification import BinaryPrecisionRecallCurve
 
 from offroad_path.evaluation.metrics import counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
 
@@ -50,6 +52,33 @@ def test_precision_recall_curve_agrees_with_the_counts_at_each_threshold():
         tp, fp, _, fn = counts(CONFIDENCE, TRUTH, threshold=float(t) - 1e-6).sum(0)
         assert r == pytest.approx(tp / (tp + fn))
         assert p == pytest.approx(tp / (tp + fp) if tp + fp else 1.0)
+
+
+def test_precision_recall_curve_is_torchmetrics_curve_exactly():
+    # 3 x 120 x 160 pixels: over torchmetrics' 50,000-element limit, so its own per-threshold loop
+    # runs; a quarter of the confidences sit exactly on a threshold, where >= must decide.
+    rng = np.random.default_rng(3)
+    shape = (3, 120, 160)
+    confidence = rng.random(shape, dtype=np.float32)
+    on_grid = rng.random(shape) < 0.25
+    confidence[on_grid] = torch.linspace(0, 1, 101).numpy()[rng.integers(0, 101, on_grid.sum())]
+    truth = rng.random(shape) < confidence  # path where confident, mostly
+    reference = BinaryPrecisionRecallCurve(thresholds=101)
+    reference.update(torch.from_numpy(confidence).flatten(), torch.from_numpy(truth).flatten().long())
+    precision, recall, threshold = reference.compute()
+    curve = precision_recall_curve(confidence, truth, batch=2)
+    assert np.array_equal(curve["threshold"], threshold.numpy())
+    assert np.array_equal(curve["recall"], recall[:-1].numpy())
+    assert np.array_equal(curve["precision"], np.nan_to_num(precision[:-1].numpy(), nan=1.0))
+
+
+def test_ground_truth_other_than_0_1_and_confidence_outside_0_1_are_refused():
+    with pytest.raises(ValueError, match="bool or 0/1; it holds values from 0 to 255"):
+        counts(CONFIDENCE, TRUTH.astype(np.uint8) * 255)
+    with pytest.raises(ValueError, match="bool or 0/1"):
+        precision_recall_curve(CONFIDENCE, TRUTH.astype(np.int64) * 2)
+    with pytest.raises(ValueError, match=r"confidence must lie in \[0, 1\]"):
+        precision_recall_curve(CONFIDENCE * 3 - 1, TRUTH)
 
 
 def test_non_corresponding_baseline_on_three_hand_made_images():

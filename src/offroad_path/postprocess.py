@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.data.dataset import load_depth, load_maps
+from offroad_path.data.loading import load_depth, load_maps
 from offroad_path.data.manifest import prediction_name, read_predictions_manifest, write_predictions_manifest
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.utils.atomic import atomic_directory, check_output_dir

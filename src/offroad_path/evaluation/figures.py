@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.data.dataset import load_sample
+from offroad_path.data.loading import load_sample
 from offroad_path.data.manifest import Sample
 
 CAPTION_PX = 22

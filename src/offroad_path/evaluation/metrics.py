@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from torchmetrics.classification import BinaryPrecisionRecallCurve
 from torchmetrics.functional.classification import binary_stat_scores
+from torchmetrics.functional.classification.precision_recall_curve import _adjust_threshold_arg, _binary_precision_recall_curve_compute
 
 
 @dataclass(frozen=True)
@@ -33,11 +33,21 @@ def counts(confidence: np.ndarray, target: np.ndarray, threshold: float = 0.5) -
     n = len(confidence)
     # torchmetrics thresholds with >=; the paper's rule is C > threshold.
     preds = (torch.from_numpy(np.ascontiguousarray(confidence, np.float32)).flatten(1) > threshold).long()
-    truth = torch.from_numpy(np.ascontiguousarray(target)).flatten(1).long()
+    truth = binary_truth(target).flatten(1).long()
     if n == 1:  # torchmetrics 1.9 squeezes a samplewise batch of one into a shape error: score it twice
         preds, truth = preds.repeat(2, 1), truth.repeat(2, 1)
-    stats = binary_stat_scores(preds, truth, multidim_average="samplewise")
+    # Both are 0/1 by construction: torchmetrics' own check (torch.unique over every pixel) took
+    # 24 of the evaluate stage's 82 s on the laptop preset.
+    stats = binary_stat_scores(preds, truth, multidim_average="samplewise", validate_args=False)
     return stats[:n, :4].numpy().astype(np.int64)  # (N, [tp, fp, tn, fn])
+
+
+def binary_truth(target: np.ndarray) -> torch.Tensor:
+    """Ground truth as a tensor, checked to be bool or 0/1 (min and max: far cheaper than torch.unique)."""
+    truth = torch.from_numpy(np.ascontiguousarray(target))
+    if truth.dtype != torch.bool and truth.numel() and (truth.min() < 0 or truth.max() > 1):
+        raise ValueError(f"ground truth must be bool or 0/1; it holds values from {truth.min()} to {truth.max()}")
+    return truth
 
 
 def scores(tp: float, fp: float, tn: float, fn: float) -> Scores:
@@ -63,15 +73,38 @@ def per_image_iou(per_image: np.ndarray) -> np.ndarray:
 
 def precision_recall_curve(confidence: np.ndarray, target: np.ndarray, thresholds: int = 101, batch: int = 16) -> dict[str, np.ndarray]:
     """Pooled precision and recall at `thresholds` evenly spaced thresholds in [0, 1] (binned, so
-    memory does not grow with the test set). Returns arrays threshold, precision, recall."""
-    curve = BinaryPrecisionRecallCurve(thresholds=thresholds)
+    memory does not grow with the test set). Returns arrays threshold, precision, recall.
+
+    torchmetrics' BinaryPrecisionRecallCurve, exactly (a test compares them), with its counting
+    done in one pass: each pixel's threshold index found by binary search, then counted, instead of
+    one pass over every pixel per threshold (17 s of the evaluate stage for six runs at 101 thresholds).
+    """
+    grid = _adjust_threshold_arg(thresholds)  # float32, as torchmetrics compares
+    confmat = torch.zeros(len(grid), 2, 2, dtype=torch.int64)  # [threshold, truth, predicted]
     for start in range(0, len(confidence), batch):
-        c = torch.from_numpy(np.ascontiguousarray(confidence[start : start + batch], np.float32))
-        curve.update(c.flatten(), torch.from_numpy(np.ascontiguousarray(target[start : start + batch])).flatten().long())
-    precision, recall, threshold = curve.compute()
+        c = torch.from_numpy(np.ascontiguousarray(confidence[start : start + batch], np.float32)).flatten()
+        confmat += threshold_confusion(c, binary_truth(target[start : start + batch]).flatten(), grid)
+    precision, recall, threshold = _binary_precision_recall_curve_compute(confmat, grid)
     # torchmetrics appends the (precision 1, recall 0) end point without a threshold, and gives nan
     # precision where nothing is predicted: 1 by the same convention (no false positives).
     return {"threshold": threshold.numpy(), "precision": np.nan_to_num(precision[:-1].numpy(), nan=1.0), "recall": recall[:-1].numpy()}
+
+
+def threshold_confusion(confidence: torch.Tensor, truth: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+    """Confusion matrices (T, 2, 2) [truth, predicted] at each threshold of the increasing `grid`,
+    predicted where confidence >= threshold; confidence (M,) in [0, 1], truth (M,) bool or 0/1."""
+    if confidence.numel() and not (confidence.min() >= 0 and confidence.max() <= 1):
+        raise ValueError(f"confidence must lie in [0, 1]; it holds values from {confidence.min()} to {confidence.max()}")
+    n = len(grid)
+    # Pixel j is predicted at threshold i exactly when grid[i] <= c_j, i.e. when i < above_j.
+    above = torch.searchsorted(grid, confidence, right=True)  # (M,) in 0..n
+    histogram = torch.bincount(above + (n + 1) * truth.long(), minlength=2 * (n + 1)).reshape(2, n + 1)
+    predicted = histogram.flip(1).cumsum(1).flip(1)[:, 1:]  # (2, T): [truth, threshold] pixels with above > i
+    totals = histogram.sum(1, keepdim=True)  # (2, 1): negatives, positives
+    confmat = torch.empty(n, 2, 2, dtype=torch.int64)
+    confmat[:, :, 1] = predicted.T
+    confmat[:, :, 0] = (totals - predicted).T
+    return confmat
 
 
 def non_corresponding(predicted: np.ndarray, target: np.ndarray, groups: list) -> Scores:

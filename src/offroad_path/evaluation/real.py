@@ -13,8 +13,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.data.dataset import read
 from offroad_path.data.labels import read_label_run
+from offroad_path.data.loading import read
 from offroad_path.evaluation.metrics import counts, non_corresponding, pooled
 from offroad_path.evaluation.tables import network_name, split_run_name
 

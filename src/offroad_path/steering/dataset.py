@@ -11,7 +11,8 @@ from albumentations.pytorch import ToTensorV2
 from omegaconf import DictConfig
 from torch.utils.data import DataLoader, Dataset
 
-from offroad_path.data.dataset import EpochSampler, read
+from offroad_path.data.dataset import EpochSampler
+from offroad_path.data.loading import read
 from offroad_path.geometry.path import mirror
 from offroad_path.steering.balance import balance_weights
 from offroad_path.steering.frames import SteeringFrame

@@ -25,7 +25,8 @@ from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.data.datamodule import OffroadDataModule
-from offroad_path.data.dataset import load_sample, transforms
+from offroad_path.data.dataset import transforms
+from offroad_path.data.loading import load_sample
 from offroad_path.data.manifest import prediction_name, write_predictions_manifest
 from offroad_path.training.checkpoints import (
     CONFIG_HASH,
