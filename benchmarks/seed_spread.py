@@ -6,13 +6,14 @@ costs and saves: each network trained from scratch once per seed, scored the eva
 Needs the split of a finished `dvc repro` (data/split, data/labels) in the working directory. Each
 run is `python -m offroad_path.train pretraining=none train.seed=S` (MLflow off) into a temporary
 folder, with any overrides after `--`; its test confidence maps are scored against the test labels
-with the evaluate stage's pooled IoU at 0.5. Prints one row per run (IoU, seconds) and, per network,
+with the evaluate stage's pooled IoU at 0.5. Prints one row per run (IoU, epochs trained, seconds) and, per network,
 the mean, the sample standard deviation and the range over the seeds.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import subprocess
 import sys
@@ -38,7 +39,7 @@ def main() -> None:
     parser.add_argument("overrides", nargs="*", help="Hydra overrides of the train stage, after --")
     args = parser.parse_args()
     print(f"overrides: {' '.join(args.overrides) or '(none: the laptop preset)'}")
-    print("| network | seed | test IoU | seconds |\n| --- | --- | --- | --- |")
+    print("| network | seed | test IoU | epochs | seconds |\n| --- | --- | --- | --- | --- |")
     results: dict[str, list[float]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for model in args.models:
@@ -51,9 +52,9 @@ def main() -> None:
                 seconds = time.perf_counter() - start
                 if run.returncode:
                     sys.exit(f"{' '.join(command)} failed:\n{run.stderr[-3000:]}")
-                iou = test_iou(out)
+                iou, epochs = test_iou(out), json.loads((out / "metrics.json").read_text())["epochs"]
                 results.setdefault(model, []).append(iou)
-                print(f"| {model} | {seed} | {iou:.4f} | {seconds:.0f} |", flush=True)
+                print(f"| {model} | {seed} | {iou:.4f} | {epochs} | {seconds:.0f} |", flush=True)
     print("\n| network | mean IoU | standard deviation | range |\n| --- | --- | --- | --- |")
     for model, ious in results.items():
         spread = statistics.stdev(ious) if len(ious) > 1 else float("nan")
