@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from dataclasses import replace
 
 import cv2
@@ -158,3 +160,11 @@ def test_unknown_depth_is_kept_by_the_papers_rule_and_dropped_on_request():
     reference = blurred(np.where(depth > 0, c, 0))
     assert dropped[70, 62] < 0.5 < kept[70, 62]  # deep inside the hole: the blurred zeros
     np.testing.assert_allclose(dropped[70, 95], reference[70, 95], atol=1e-6)
+
+
+def test_the_postprocess_stage_starts_without_torch():
+    # Six postprocess stages run in the laptop pipeline; torch's and albumentations' imports were
+    # about 3 of each one's 4.8 s (benchmarks/README.md). The file readers live in data/loading.py for this.
+    check = "import sys, offroad_path.postprocess; print(sorted({'torch', 'albumentations', 'lightning'} & set(sys.modules)))"
+    run = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[]"

@@ -1,6 +1,6 @@
 """A sample's files read from disk as numpy arrays: image, path label or semantic map, stereo depth,
-and the confidence maps the train and postprocess stages write. No torch here: the stages that only
-read and score files (postprocess, evaluate's scoring) start without importing it."""
+and the confidence maps the train and postprocess stages write. No torch here, so that postprocess,
+which only reads, filters and writes maps, starts without importing it (2 s less per stage)."""
 
 from __future__ import annotations
 
