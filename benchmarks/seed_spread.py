@@ -6,8 +6,8 @@ costs and saves: each network trained from scratch once per seed, scored the eva
 Needs the split of a finished `dvc repro` (data/split, data/labels) in the working directory. Each
 run is `python -m offroad_path.train pretraining=none train.seed=S` (MLflow off) into a temporary
 folder, with any overrides after `--`; its test confidence maps are scored against the test labels
-with the evaluate stage's pooled IoU at 0.5. Prints one row per run (IoU, epochs trained, seconds) and, per network,
-the mean, the sample standard deviation and the range over the seeds.
+with the evaluate stage's pooled IoU at 0.5. Prints one row per run (IoU, epochs trained, seconds)
+and, per network, the mean, the sample standard deviation and the range over the seeds.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from offroad_path.data.manifest import read_predictions_manifest
 from offroad_path.evaluation.metrics import counts, pooled
 
 
-def test_iou(run_dir: Path, threshold: float = 0.5) -> float:
+def pooled_test_iou(run_dir: Path, threshold: float = 0.5) -> float:
     rows = read_predictions_manifest(run_dir / "predictions" / "manifest.csv", "train")
     samples, paths = [s for s, _ in rows], [p for _, p in rows]
     return pooled(counts(load_maps(paths), load_labels(samples), threshold)).iou
@@ -52,7 +52,7 @@ def main() -> None:
                 seconds = time.perf_counter() - start
                 if run.returncode:
                     sys.exit(f"{' '.join(command)} failed:\n{run.stderr[-3000:]}")
-                iou, epochs = test_iou(out), json.loads((out / "metrics.json").read_text())["epochs"]
+                iou, epochs = pooled_test_iou(out), json.loads((out / "metrics.json").read_text())["epochs"]
                 results.setdefault(model, []).append(iou)
                 print(f"| {model} | {seed} | {iou:.4f} | {epochs} | {seconds:.0f} |", flush=True)
     print("\n| network | mean IoU | standard deviation | range |\n| --- | --- | --- | --- |")
