@@ -2,7 +2,7 @@
 
     python benchmarks/render_speed.py [--sequences 4] [--frames 40]
 
-Renders the default world (experiment=laptop settings) into a temporary folder with the real
+Renders the default world (the embedded default settings) into a temporary folder with the real
 synthesize code path (world build, both views, PNG writing), once on one worker and once on
 every core, and prints frames per second for each.
 """

@@ -4,7 +4,7 @@ costs and saves: each network trained from scratch once per seed, scored the eva
     python benchmarks/seed_spread.py [--seeds 0 1 2] [--models segnet fcn unet] [-- trainer.max_epochs=4 ...]
 
 Needs the split of a finished `dvc repro` (data/split, data/labels) in the working directory. Each
-run is `python -m offroad_path.train pretraining=none train.seed=S` (MLflow off) into a temporary
+run is `python -m offroad_path.train pretraining=none seed=S` (MLflow off) into a temporary
 folder, with any overrides after `--`; its test confidence maps are scored against the test labels
 with the evaluate stage's pooled IoU at 0.5. Prints one row per run (IoU, epochs trained, seconds)
 and, per network, the mean, the sample standard deviation and the range over the seeds.
@@ -45,8 +45,8 @@ def main() -> None:
         for model in args.models:
             for seed in args.seeds:
                 out = Path(tmp) / f"{model}-{seed}"
-                command = [sys.executable, "-m", "offroad_path.train", f"model={model}", "pretraining=none", f"train.seed={seed}",
-                           f"train.out_dir={out}", "train.resume=false", "mlflow.enabled=false", *args.overrides]  # fmt: skip
+                command = [sys.executable, "-m", "offroad_path.train", f"model={model}", "pretraining=none", f"seed={seed}",
+                           f"train.out_dir={out}", "resume=false", "mlflow.enabled=false", *args.overrides]  # fmt: skip
                 start = time.perf_counter()
                 run = subprocess.run(command, capture_output=True, text=True)
                 seconds = time.perf_counter() - start

@@ -43,7 +43,7 @@ def main() -> None:
 
     startup = min(timed(lambda: subprocess.run([sys.executable, "-c", "import offroad_path.train"], check=True))[0] for _ in range(2))
     cfg = load_config(f"model={args.model}", f"data.split_dir={args.split_dir}", "mlflow.enabled=false")
-    data = OffroadDataModule.from_config(cfg.data, "path", cfg.train.seed)
+    data = OffroadDataModule.from_config(cfg.data, "path", cfg.seed)
     data.setup()
     train = data.samples["train"]
     decode, _ = timed(lambda: [(cv2.imread(s.image), cv2.imread(s.label, cv2.IMREAD_GRAYSCALE)) for s in train])

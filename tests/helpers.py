@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from offroad_path.utils.cli import run_stage
+from offroad_path.stage import run_stage
 
 ROOT = Path(__file__).resolve().parents[1]
 

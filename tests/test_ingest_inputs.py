@@ -12,12 +12,12 @@ import yaml
 from helpers import refused
 from raw_rig import RosMessages, body_poses, write_bag, write_videos
 
+from offroad_path.errors import InputError
 from offroad_path.ingest import ingest
 from offroad_path.recordings.bags import decode_image, info_topic_for
 from offroad_path.recordings.calibration import CameraModel, StereoRig, read_rig, write_opencv
 from offroad_path.recordings.sync import SyncStats, pair_by_stamp, poses_at
 from offroad_path.recordings.video import estimate_offset
-from offroad_path.sequence.errors import SequenceError
 
 LEFT, RIGHT = "/stereo/left/image_raw", "/stereo/right/image_raw"
 
@@ -90,13 +90,13 @@ def write_rig(rig, path: Path, T: np.ndarray) -> Path:
 
 
 def test_calibration_mistakes_are_named(rig, tmp_path):
-    with pytest.raises(SequenceError, match="left and right are swapped"):
+    with pytest.raises(InputError, match="left and right are swapped"):
         read_rig(write_rig(rig, tmp_path / "swapped.yaml", -rig.T))
-    with pytest.raises(SequenceError, match="calibration_unit_m"):
+    with pytest.raises(InputError, match="calibration_unit_m"):
         read_rig(write_rig(rig, tmp_path / "mm.yaml", rig.T * 1000))
     assert np.allclose(read_rig(tmp_path / "mm.yaml", unit_m=0.001).T, rig.T)
     (tmp_path / "other.yaml").write_text("a: 1\n")
-    with pytest.raises(SequenceError, match="is not a stereo calibration"):
+    with pytest.raises(InputError, match="is not a stereo calibration"):
         read_rig(tmp_path / "other.yaml")
 
 
@@ -132,7 +132,7 @@ def test_kitti_style_scale_and_image_size(rig, tmp_path):
     """A calibration made at twice the recording's size scales K; another aspect is refused."""
     cam = CameraModel(rig.K[0] * [[2], [2], [1]], rig.D[0], (rig.size[0] * 2, rig.size[1] * 2))
     assert np.allclose(cam.at_size(rig.size, tmp_path).K, rig.K[0])
-    with pytest.raises(SequenceError, match="not a uniform scale"):
+    with pytest.raises(InputError, match="not a uniform scale"):
         cam.at_size((rig.size[0], rig.size[0]), tmp_path)
 
 
@@ -147,7 +147,7 @@ def test_pairing_by_stamp_drops_and_counts_the_unmatched(tmp_path):
     assert (stats.left, stats.right, stats.pairs, stats.unpaired) == (10, 10, 9, 2)
     assert stats.worst_gap_s == pytest.approx(0.004)
     backwards = [("left", 1.0, 0), ("left", 0.9, 1)]
-    with pytest.raises(SequenceError, match=f"{LEFT}: stamps do not rise"):
+    with pytest.raises(InputError, match=f"{LEFT}: stamps do not rise"):
         list(pair_by_stamp(backwards, 0.005, SyncStats(), {"left": LEFT, "right": RIGHT}, tmp_path))
 
 
@@ -177,11 +177,11 @@ def test_image_encodings(tmp_path):
         header=header, height=4, width=6, encoding="mono16", is_bigendian=1, step=12, data=np.frombuffer(wide.tobytes(), np.uint8)
     )
     assert (decode_image(mono16, "t", tmp_path) == (wide.astype(np.uint16) >> 8)).all()
-    with pytest.raises(SequenceError, match="t: a 6x4 rgb8 image has 10 bytes"):
+    with pytest.raises(InputError, match="t: a 6x4 rgb8 image has 10 bytes"):
         decode_image(
             image(header=header, height=4, width=6, encoding="rgb8", is_bigendian=0, step=18, data=np.zeros(10, np.uint8)), "t", tmp_path
         )
-    with pytest.raises(SequenceError, match="encoding 'yuv422' is not supported"):
+    with pytest.raises(InputError, match="encoding 'yuv422' is not supported"):
         decode_image(
             image(header=header, height=4, width=6, encoding="yuv422", is_bigendian=0, step=12, data=np.zeros(48, np.uint8)), "t", tmp_path
         )

@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 from offroad_path.config import OdometryConfig
+from offroad_path.errors import InputError
 from offroad_path.label import label
 from offroad_path.labelling.compare import compare
 from offroad_path.odometry.trajectory import drift, run_odometry
-from offroad_path.sequence import SequenceError, open_sequence
+from offroad_path.sequence import open_sequence
 from offroad_path.utils.atomic import MARKER
 
 
@@ -190,7 +191,7 @@ def test_bad_input_names_the_file_and_leaves_no_labels(compose_config, drive, tm
     previous.mkdir()
     (previous / MARKER).write_text("label\n")  # an earlier run of the stage
     (previous / "earlier.txt").write_text("a complete earlier run")
-    with pytest.raises(SequenceError, match=str(recordings / "drive" / file)):
+    with pytest.raises(InputError, match=str(recordings / "drive" / file)):
         label(label_config(compose_config, recordings, tmp_path, *overrides))
     assert sorted(p.name for p in previous.iterdir()) == [MARKER, "earlier.txt"]
     assert not list(tmp_path.glob(".labels*"))

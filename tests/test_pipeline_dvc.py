@@ -81,7 +81,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     # A U-Net setting, changed by a DVC experiment, reruns the U-Net stages and nothing else.
     git(repo_copy, "add", "-A")
     git(repo_copy, "commit", "-q", "-m", "baseline")
-    ran = set(re.findall(r"Running stage '([^']+)'", dvc(repo_copy, "exp", "run", "-S", "conf/model/unet.yaml:laptop_lr=0.05")))
+    ran = set(re.findall(r"Running stage '([^']+)'", dvc(repo_copy, "exp", "run", "-S", "conf/model/unet.yaml:lr=0.05")))
     assert ran == {"pretrain@unet", "train_scratch@unet", "train_pretrained@unet", "postprocess@unet-none", "postprocess@unet-segmentation",
                    "evaluate"}  # fmt: skip
-    assert "laptop_lr" in dvc(repo_copy, "exp", "show", "--md")
+    assert "unet.yaml:lr" in dvc(repo_copy, "exp", "show", "--md")

@@ -221,10 +221,10 @@ def test_a_predictions_manifest_pointing_outside_its_folder(compose_config, trai
 
 
 def test_the_sequence_error_survives_pickling():
-    from offroad_path.sequence.errors import SequenceError
+    from offroad_path.errors import InputError
 
-    error = pickle.loads(pickle.dumps(SequenceError("/a/b.png", "is broken")))
-    assert isinstance(error, SequenceError) and str(error) == "/a/b.png: is broken" and error.problem == "is broken"
+    error = pickle.loads(pickle.dumps(InputError("/a/b.png", "is broken")))
+    assert isinstance(error, InputError) and str(error) == "/a/b.png: is broken" and error.problem == "is broken"
 
 
 def test_the_cli_runs_the_same_checks(tmp_path):

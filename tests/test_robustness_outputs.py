@@ -172,8 +172,8 @@ def test_a_corrupt_resume_checkpoint_is_named_and_resume_false_starts_afresh(tin
     (last,) = (tmp_path / ".resume").glob("run-*/last.ckpt")
     last.write_bytes(last.read_bytes()[:1000])
     shutil.rmtree(tmp_path / "run")
-    refused(train, cfg, capsys, tmp_path, last, "train.resume=false")
-    cfg.train.resume = False
+    refused(train, cfg, capsys, tmp_path, last, "resume=false")
+    cfg.resume = False
     assert train(cfg)["global_step"] > 0
 
 
@@ -181,7 +181,7 @@ def test_a_resume_checkpoint_of_another_configuration_is_refused(tiny_config, tm
     first = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false")
     train(first)
     (state_a,) = (tmp_path / ".resume").glob("run-*")
-    changed = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false", "model.laptop_lr=0.001")
+    changed = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false", "model.lr=0.001")
     train(changed)
     (state_b,) = set((tmp_path / ".resume").glob("run-*")) - {state_a}  # a changed config never shares resume state
     shutil.copy(state_a / "last.ckpt", state_b / "last.ckpt")  # as if it did

@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from offroad_path.sequence import SequenceError, open_sequence
+from offroad_path.errors import InputError
+from offroad_path.sequence import open_sequence
 
 K_ROW = "700 0 320 0 0 700 180 0 0 0 1 0"
 P_RIGHT = "700 0 320 -280 0 700 180 0 0 0 1 0"  # baseline 280 / 700 = 0.4 m
@@ -122,7 +123,7 @@ BAD_INPUTS = {
 def test_bad_input_names_the_file(sequence, case):
     damage, file, problem = BAD_INPUTS[case]
     damage(sequence)
-    with pytest.raises(SequenceError) as info:
+    with pytest.raises(InputError) as info:
         open_sequence(sequence)
     message = str(info.value)
     assert str(sequence / file) in message and problem in message
@@ -132,7 +133,7 @@ def test_undecodable_image_names_the_file(sequence):
     path = sequence / "image_l" / "000001.png"
     path.write_bytes(path.read_bytes()[:60])  # a valid header, then the data is cut off
     seq = open_sequence(sequence)
-    with pytest.raises(SequenceError, match=r"000001\.png: cannot be decoded"):
+    with pytest.raises(InputError, match=r"000001\.png: cannot be decoded"):
         seq.load_left(1)
 
 

@@ -95,7 +95,7 @@ def test_oversampling_draws_by_weight_and_replays_each_epoch():
 def test_balance_reaches_the_training_loader_only(compose_config, labelled_drive, split_dir, balance):
     cfg = compose_config("split.block_m=4", "split.guard_m=3", f"steering.balance={balance}")
     parts = steering_split(labelled_drive, split_dir, cfg.split.block_m, cfg.split.guard_m, mirror=True)
-    data = SteeringDataModule(parts, cfg.steering)
+    data = SteeringDataModule(parts, cfg.steering, cfg.seed)
     train, val = data.train_dataloader(), data.val_dataloader()
     assert (train.sampler.weights is not None) == (balance == "oversample")
     assert ("weight" in train.dataset[0]) == (balance == "weighted") and "weight" not in val.dataset[0]

@@ -48,7 +48,7 @@ def test_vehicle_stands_on_rolling_terrain(compose_config):
 
 @pytest.fixture(scope="module")
 def laptop_worlds(compose_config):
-    cfg = compose_config("experiment=laptop")
+    cfg = compose_config()
     return cfg, [build_world(cfg.world, sequence_seed(cfg.synthesize.seed, i)) for i in range(cfg.synthesize.sequences)]
 
 

@@ -16,10 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+from offroad_path.errors import InputError, clear_errors
 from offroad_path.recordings.boards import Board, calibrate_stereo
 from offroad_path.recordings.calibration import write_opencv
-from offroad_path.sequence.errors import SequenceError
-from offroad_path.utils.cli import clear_errors
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
@@ -28,11 +27,11 @@ def image_pairs(left: Path, right: Path) -> tuple[list[Path], list[Path]]:
     names = []
     for folder in (left, right):
         if not folder.is_dir():
-            raise SequenceError(folder, "is not a folder of board images")
+            raise InputError(folder, "is not a folder of board images")
         names.append({p.name for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES})
     common = sorted(names[0] & names[1])
     if not common:
-        raise SequenceError(right, f"has no image named as one in {left} (a pair is two images of one name)")
+        raise InputError(right, f"has no image named as one in {left} (a pair is two images of one name)")
     return [left / n for n in common], [right / n for n in common]
 
 
@@ -58,7 +57,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     with clear_errors():
         if args.out.exists():
-            raise SequenceError(args.out, "exists; it is not replaced (choose another --out or remove it)")
+            raise InputError(args.out, "exists; it is not replaced (choose another --out or remove it)")
         left, right = image_pairs(args.left, args.right)
         board = Board(*args.board, args.square_m, args.marker_m, args.dictionary)
         result = calibrate_stereo(left, right, board, args.out)

@@ -9,6 +9,8 @@ an error naming the key. Library code reads its settings from a composed config
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,15 +24,23 @@ from offroad_path.utils.threads import is_thread_setting
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 IMAGE_SIZE = between(16, 8192)  # pixels of an image side
+MAX_STEPS = rule(lambda v: v == -1 or v >= 1, "must be -1 (no cap) or an integer >= 1")  # SGD steps, besides max_epochs
 THREADS = {"rule": Rule(is_thread_setting, "must be all, free or a whole number >= 1")}  # offroad_path.utils.threads
-PRETRAININGS = ("none", "segmentation", "imagenet")
-BALANCES = ("none", "oversample", "weighted")  # steering.balance (offroad_path.steering.balance)
 
 
 def _model_names() -> list[str]:
     """The networks with a config file (conf/model/<name>.yaml); tests check these against the
     registry, offroad_path.models.MODELS, which config validation need not import."""
     return [p.stem for p in (CONF_DIR / "model").glob("*.yaml")]
+
+
+def registry(module: str, name: str) -> Callable[[], list[str]]:
+    """The valid names of a choice, read from the registry `module.name` that implements it when a
+    value is checked (a stage checks only the groups it reads, so it imports only its own modules)."""
+    return lambda: list(getattr(importlib.import_module(f"offroad_path.{module}"), name))
+
+
+PRETRAININGS = registry("training.pretrained", "CHOICES")
 
 
 @dataclass
@@ -90,7 +100,8 @@ class SynthesizeConfig:
 
 @dataclass
 class PosesConfig:
-    source: str = setting(one_of(("vo", "file")))  # vo: stereo visual odometry; file: a KITTI-format pose file per sequence
+    # vo: stereo visual odometry; file: a KITTI-format pose file per sequence
+    source: str = setting(one_of(registry("labelling.labeller", "POSE_SOURCES")))
     # With source=file: a path pattern with {name} (the sequence folder's name), or None for
     # the sequence's own poses (poses.txt, or KITTI's poses/XX.txt).
     file: str | None = MISSING
@@ -99,9 +110,8 @@ class PosesConfig:
 @dataclass
 class OcclusionConfig:
     enabled: bool = MISSING  # beyond the paper: no path label on ground hidden behind a crest or obstacle
-    depth: str = setting(
-        one_of(("stereo", "ground_truth"))
-    )  # stereo: from the f0 disparity; ground_truth: the sequence's depth/ (synthetic)
+    # stereo: from the f0 disparity; ground_truth: the sequence's depth/ (synthetic)
+    depth: str = setting(one_of(registry("labelling.labeller", "OCCLUSION_DEPTHS")))
     margin_m: float = setting(at_least(0))
     margin_rel: float = setting(at_least(0))
 
@@ -173,7 +183,7 @@ class OdometryConfig:
     """Stereo visual odometry (offroad_path.odometry): the front end's settings are shared; the
     window, fallback and depth-weighting settings are the windowed estimator's."""
 
-    method: str = setting(one_of(("windowed", "frame_to_frame")))
+    method: str = setting(one_of(registry("odometry.trajectory", "ESTIMATORS")))
     max_features: int = MISSING
     bucket_rows: int = MISSING
     bucket_cols: int = MISSING
@@ -203,7 +213,7 @@ class LabelConfig:
     out_dir: str = MISSING
     metrics_path: str = MISSING
     distance_m: float = setting(positive())
-    strategy: str = setting(one_of(("midway", "stride")))
+    strategy: str = setting(one_of(registry("labelling.frame_selection", "STRATEGIES")))
     stride_m: float = setting(positive())
     min_motion_m: float = setting(at_least(0))
     poses: PosesConfig = field(default_factory=PosesConfig)
@@ -218,7 +228,8 @@ class LabelConfig:
 class SplitConfig:
     labels_dir: str = MISSING
     out_dir: str = MISSING
-    strategy: str = setting(one_of(("grouped", "random")))  # grouped: by blocks of driving, no leakage; random: the paper's per-image split
+    # grouped: by blocks of driving, no leakage; random: the paper's per-image split
+    strategy: str = setting(one_of(registry("data.splitting", "STRATEGIES")))
     test_fraction: float = setting(between(0, 1, low_open=True, high_open=True))
     val_fraction: float = setting(between(0, 1, high_open=True))
     block_m: float = setting(positive())
@@ -246,9 +257,7 @@ class ModelConfig:
     name: str = setting(one_of(_model_names))
     width: float = setting(positive())  # channel multiplier: 1 is the original network
     lr: float = setting(positive())
-    # The learning rate experiment=laptop uses: narrow networks on small inputs for a few epochs
-    # learn nothing in that time at the paper's rates.
-    laptop_lr: float = setting(positive())
+    paper_lr: float = setting(positive())  # the paper's rate, which experiment=paper takes
     lr_step_epochs: int = setting(at_least(0))  # step decay every N epochs (0: fixed learning rate)
     lr_gamma: float = setting(between(0, 1, low_open=True))
     momentum: float = setting(between(0, 1, high_open=True))
@@ -286,17 +295,17 @@ class TrainerConfig:
 class PretrainConfig:
     out_dir: str = MISSING
     max_epochs: int | None = setting(at_least(1))  # None: trainer.max_epochs
-    max_steps: int | None = setting(at_least(1))  # None: train.max_steps
+    max_steps: int = setting(MAX_STEPS)
+    sample_images: int = setting(at_least(0))  # validation predictions logged to MLflow each epoch
+    channels_last: bool = MISSING
 
 
 @dataclass
 class TrainConfig:
     out_dir: str = MISSING
-    seed: int = MISSING
-    resume: bool = MISSING  # continue an interrupted run from its last.ckpt (in .resume/ beside out_dir); false: start afresh
     sample_images: int = setting(at_least(0))  # validation predictions logged to MLflow each epoch
     channels_last: bool = MISSING  # channels-last memory format (default: the model file's choice)
-    max_steps: int = setting(rule(lambda v: v == -1 or v >= 1, "must be -1 (no cap) or an integer >= 1"))  # SGD steps, besides max_epochs
+    max_steps: int = setting(MAX_STEPS)
 
 
 @dataclass
@@ -307,7 +316,8 @@ class PostprocessConfig:
     sigma: float = setting(between(0, 100, low_open=True))  # Gaussian blur, pixels of the label-sized map
     delta: float = setting(between(0, 1, high_open=True))  # confidence below this is set to 0
     use_depth: bool = MISSING
-    unknown_depth: str = setting(one_of(("keep", "drop")))  # pixels without stereo depth: keep (the paper) or zero
+    # pixels without stereo depth: keep (the paper) or zero
+    unknown_depth: str = setting(one_of(registry("postprocessing.filter", "UNKNOWN_DEPTH")))
     blur_scale: int = setting(between(1, 8))  # the blur runs at 1/blur_scale of the resolution (1: exact)
 
 
@@ -364,8 +374,9 @@ class SteeringConfig:
     patience: int = setting(at_least(1))  # early stopping on validation mean absolute error
     mirror: bool = MISSING  # add mirrored copies with negated steering
     jitter: float = MISSING  # photometric augmentation (no geometric: it would change the steering)
-    balance: str = setting(one_of(BALANCES))  # the straight-ahead bias's remedy: none | oversample | weighted
-    seed: int = MISSING
+    cache_mb: float = setting(at_least(0))  # decoded images kept in memory (0: decode each epoch)
+    # the straight-ahead bias's remedy: none | oversample | weighted
+    balance: str = setting(one_of(registry("steering.balance", "BALANCES")))
     lock_deg: float = setting(positive())  # road-wheel angle of normalised steering 1, for errors in degrees
     steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree
     metrics_path: str = MISSING
@@ -432,13 +443,16 @@ class Config:
     export: ExportConfig = field(default_factory=ExportConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = MISSING
+    seed: int = MISSING  # the training seed (pretrain, train, train_steering)
+    resume: bool = MISSING  # continue an interrupted training run from its last.ckpt (in .resume/ beside out_dir); false: start afresh
     optimized_metric: str | None = MISSING  # the stage's metric a Hydra sweeper optimises (hparams_search)
     threads: str = setting(THREADS)  # torch, OpenCV and OpenMP threads of a stage's process: all, free or a number
 
 
-def validate_config(cfg) -> None:
-    """Every value with a rule in these schemas, checked before a stage works (ConfigValueError)."""
-    validate(cfg, Config)
+def validate_config(cfg: DictConfig, groups: tuple[str, ...] | None = None) -> None:
+    """Every value with a rule in these schemas (only those of `groups` and the top-level values,
+    when given), checked before a stage works (ConfigValueError)."""
+    validate(cfg, Config, only=groups)
 
 
 def run_grid(architectures: list[str], pretrainings: list[str]) -> list[str]:

@@ -19,12 +19,13 @@ from omegaconf import DictConfig
 from offroad_path.evaluation.report import Report, check_outputs, score_runs, write_report
 from offroad_path.evaluation.tables import ResultRow, split_run_name
 from offroad_path.evaluation.temporal import score_temporal
-from offroad_path.utils.cli import hydra_stage
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.tracking import stage_run, tracking_uri
 
 log = logging.getLogger("offroad_path.evaluate")
 
 
+@reads("evaluate", "label", "split", "mlflow")
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
     check_outputs(cfg.evaluate)
     report = score_runs(cfg.evaluate)

@@ -18,12 +18,13 @@ from omegaconf import DictConfig
 
 from offroad_path.inference.export import export_onnx
 from offroad_path.inference.runners import TorchModel
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import UnsafeOutputError
-from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.export")
 
 
+@reads("export")
 def run_export(cfg: DictConfig) -> float:
     e = cfg.export
     out = Path(e.out)

@@ -23,8 +23,8 @@ from omegaconf import DictConfig
 from offroad_path.recordings.bags import Bag
 from offroad_path.recordings.sources import open_source
 from offroad_path.recordings.writer import write_sequence
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
-from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.ingest")
 
@@ -34,6 +34,7 @@ def list_topics(bag: str) -> list[str]:
         return [f"{topic}  {msgtype}  {count} messages" for topic, (msgtype, count) in opened.topics().items()]
 
 
+@reads("ingest")
 def ingest(cfg: DictConfig) -> dict:
     c = cfg.ingest
     if c.list_topics:

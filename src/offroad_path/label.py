@@ -22,8 +22,8 @@ from omegaconf import DictConfig
 from offroad_path.labelling.labeller import check_inputs, label_sequence
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.sequence.reader import find_sequences, open_sequence
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
-from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.parallel import map_processes
 from offroad_path.utils.tracking import stage_run
 
@@ -56,6 +56,7 @@ def drift_metrics(drifts: list[dict]) -> dict[str, float]:
     }
 
 
+@reads("label", "mlflow")
 def label(cfg: DictConfig) -> dict:
     in_dir, out_dir = Path(cfg.label.in_dir), Path(cfg.label.out_dir)
     check_output_dir(out_dir, "label.out_dir", [in_dir])

@@ -20,14 +20,15 @@ from omegaconf import DictConfig
 from offroad_path.data.loading import load_depth, load_maps
 from offroad_path.data.manifest import prediction_name, read_predictions_manifest, write_predictions_manifest
 from offroad_path.postprocessing import PostprocessParams, postprocess
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
-from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.postprocess")
 
 BATCH = 64  # maps in memory at once
 
 
+@reads("postprocess")
 def run_postprocess(cfg: DictConfig) -> int:
     c = cfg.postprocess
     params = PostprocessParams.from_config(c)

@@ -26,8 +26,8 @@ from tqdm import tqdm
 from offroad_path.inference.runners import load_model
 from offroad_path.inference.sources import open_source
 from offroad_path.postprocessing import PostprocessParams, postprocess
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
-from offroad_path.utils.cli import hydra_stage
 from offroad_path.utils.threads import set_threads
 from offroad_path.utils.tracking import tracking_uri
 from offroad_path.viz import overlay
@@ -46,6 +46,7 @@ def write_frame(tmp: Path, name: str, confidence: np.ndarray, shown: np.ndarray,
         video.write(shown)
 
 
+@reads("predict", "postprocess", "label", "mlflow")
 def run_predict(cfg: DictConfig) -> dict:
     p, pp = cfg.predict, cfg.postprocess
     inputs = [p.input] + ([p.checkpoint] if p.checkpoint else [])

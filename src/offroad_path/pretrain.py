@@ -12,20 +12,16 @@ import logging
 
 from omegaconf import DictConfig
 
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.training.run import fit_segmentation
-from offroad_path.utils.cli import hydra_stage
 from offroad_path.world.classes import CLASS_NAMES
 
 log = logging.getLogger("offroad_path.pretrain")
 
 
+@reads("pretrain", "data", "model", "trainer", "callbacks", "logger", "mlflow")
 def pretrain(cfg: DictConfig) -> dict:
-    cfg = cfg.copy()
-    if cfg.pretrain.max_epochs is not None:
-        cfg.trainer.max_epochs = cfg.pretrain.max_epochs
-    if cfg.pretrain.max_steps is not None:
-        cfg.train.max_steps = cfg.pretrain.max_steps
-    metrics = fit_segmentation(cfg, "pretrain", "semantic", len(CLASS_NAMES))
+    metrics = fit_segmentation(cfg, "pretrain", target="semantic")
     log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])
     return metrics
 

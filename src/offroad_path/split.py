@@ -17,8 +17,8 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample, data_root, write_manifest
 from offroad_path.data.splitting import Frame, split_frames
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, check_output_dir
-from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.split")
 
@@ -37,6 +37,7 @@ def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int]
     return frames, samples
 
 
+@reads("split")
 def split(cfg: DictConfig) -> dict:
     c = cfg.split
     check_output_dir(c.out_dir, "split.out_dir", [c.labels_dir])

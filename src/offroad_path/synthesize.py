@@ -10,12 +10,13 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from offroad_path.stage import hydra_stage, log, reads
 from offroad_path.utils.atomic import atomic_directory
-from offroad_path.utils.cli import hydra_stage, log
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.record import record_sequences
 
 
+@reads("synthesize", "world")
 def synthesize(cfg: DictConfig) -> list[dict]:
     out_dir = Path(cfg.synthesize.out_dir)
     with atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:

@@ -16,12 +16,13 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.training.run import fit_segmentation, write_confidence_maps
-from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.train")
 
 
+@reads("train", "data", "model", "pretraining", "trainer", "callbacks", "logger", "mlflow")
 def train(cfg: DictConfig) -> dict:
     out_dir = Path(cfg.train.out_dir)
 
@@ -30,7 +31,7 @@ def train(cfg: DictConfig) -> dict:
         log.info("%d confidence maps in %s", written, out_dir / "predictions")
         return {}
 
-    metrics = fit_segmentation(cfg, "train", "path", 2, predictions)
+    metrics = fit_segmentation(cfg, "train", target="path", pretraining=cfg.pretraining, write_more=predictions)
     log.info("%s-%s: best validation IoU %s, test IoU %.4f", cfg.model.name, cfg.pretraining.name, metrics["best_val_iou"],
              metrics["test/iou"])  # fmt: skip
     return metrics

@@ -20,13 +20,13 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from offroad_path.stage import hydra_stage, reads
 from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
 from offroad_path.steering.frames import PARTS, steering_split
 from offroad_path.steering.task import SteeringTask
-from offroad_path.training.run import LENGTH_SETTINGS, RunSpec, fit, training_logger
+from offroad_path.training.run import RunSpec, fit, run_identity, training_logger
 from offroad_path.utils.atomic import check_output_dir, write_text_atomic
-from offroad_path.utils.cli import hydra_stage
 
 log = logging.getLogger("offroad_path.train_steering")
 
@@ -41,24 +41,20 @@ def predict(task: SteeringTask, loader) -> tuple[np.ndarray, np.ndarray]:
     return torch.cat(true).numpy(), torch.cat(predicted).numpy()
 
 
+@reads("steering", "split", "trainer", "callbacks", "logger", "mlflow")
 def train_steering(cfg: DictConfig) -> dict:
-    s, t = cfg.steering, cfg.trainer
+    s = cfg.steering
     inputs = [s.labels_dir, s.split_dir]
     check_output_dir(s.out_dir, "steering.out_dir", inputs)
-    L.seed_everything(s.seed, workers=True)
+    L.seed_everything(cfg.seed, workers=True)
+    # The frames follow the path split's blocks of driving, with its guard (conf/split).
     parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror)
-    data = SteeringDataModule(parts, s, cfg.data.cache_mb)
+    data = SteeringDataModule(parts, s, cfg.seed)
     task = SteeringTask.from_config(s)
-    outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs")
-    identity = {
-        "stage": "train_steering", "block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,
-        "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs},
-        "trainer": {k: v for k, v in OmegaConf.to_container(t, resolve=True).items() if k not in LENGTH_SETTINGS},
-        "callbacks": OmegaConf.to_container(cfg.callbacks, resolve=True),
-    }  # fmt: skip
+    outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb")
+    settings = {"block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,
+                "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs}}  # fmt: skip
     files = [Path(s.split_dir) / f"{part}.csv" for part in PARTS] + [Path(s.labels_dir) / "summary.json"]
-    spec = RunSpec("train_steering", Path(s.out_dir), inputs, s.seed, cfg.train.resume, t, cfg.callbacks, s.max_epochs, identity, files,
-                   patience=s.patience, out_key="steering.out_dir")  # fmt: skip
     scored: dict[str, np.ndarray] = {}
 
     def write_predictions(task: SteeringTask, data: SteeringDataModule, tmp: Path) -> dict:
@@ -77,9 +73,12 @@ def train_steering(cfg: DictConfig) -> dict:
         scatter_plot(true, predicted, tmp / "scatter.png")
         return {**steering_metrics(true, predicted, s.lock_deg, s.steering_ratio), "by_true_magnitude": bins}
 
+    spec = RunSpec(stage="train_steering", out_dir=Path(s.out_dir), out_key="steering.out_dir", inputs=inputs,
+                   key=run_identity(cfg, "train_steering", settings, files), max_epochs=s.max_epochs, patience=s.patience,
+                   write_more=write_predictions)  # fmt: skip
     tags = {"stage": "train_steering", "model": "pilotnet"}
-    logger = training_logger(cfg, "train_steering pilotnet", tags, {"steering": OmegaConf.to_container(s, resolve=True)})
-    results = fit(task, data, spec, logger, write_predictions)
+    logger = training_logger(cfg, "train_steering pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
+    results = fit(cfg, task, data, spec, logger)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
     true, predicted = scored["true"], scored["predicted"]
     write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n")

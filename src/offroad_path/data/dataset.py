@@ -79,21 +79,21 @@ class ManifestDataset(Dataset):
         self.transform = transform
         self.cache_bytes = int(cache_mb * 2**20)
         self.cached_bytes = 0
-        self._cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # index -> decoded (image, mask), read-only arrays
 
     def __len__(self) -> int:
         return len(self.samples)
 
     def load(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """load_sample of sample i, from the cache when it is there."""
-        if (hit := self._cache.get(i)) is not None:
+        if (hit := self.cache.get(i)) is not None:
             return hit
         image, mask = load_sample(self.samples[i], self.target)
         mask = mask.astype(np.uint8)  # class ids < 256: an eighth of int64's bytes in the cache
         size = image.nbytes + mask.nbytes
         if self.cached_bytes + size <= self.cache_bytes:
             image.flags.writeable = mask.flags.writeable = False
-            self._cache[i] = (image, mask)
+            self.cache[i] = (image, mask)
             self.cached_bytes += size
         return image, mask
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.utils.cli import clear_errors
+from offroad_path.errors import clear_errors
 
 
 def read_mask(path: Path) -> np.ndarray:

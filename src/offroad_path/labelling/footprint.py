@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offroad_path.sequence.errors import SequenceError
+from offroad_path.errors import InputError
 from offroad_path.sequence.reader import Sequence
 
 NEAR_M = 0.3
@@ -54,7 +54,7 @@ def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
         if value is None:
             value = seq.meta.get(meta_key, 0.0 if key == "camera_pitch_deg" else None)
         if value is None:
-            raise SequenceError(seq.root / "meta.json", f"gives no {meta_key}: set label.footprint.{key} for this recording")
+            raise InputError(seq.root / "meta.json", f"gives no {meta_key}: set label.footprint.{key} for this recording")
         values[key] = float(value)
     return VehicleFootprint(**values)
 

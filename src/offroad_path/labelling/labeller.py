@@ -13,19 +13,20 @@ import cv2
 import numpy as np
 
 from offroad_path.config import OdometryConfig
+from offroad_path.errors import InputError
 from offroad_path.geometry.path import distance_along
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, encode_disparity, sgbm
 from offroad_path.labelling.footprint import Occlusion, footprint_depth, footprint_for, path_mask, swept_polygons
 from offroad_path.labelling.frame_selection import select_segments
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
-from offroad_path.sequence.errors import SequenceError
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import Sequence
 
 log = logging.getLogger(__name__)
 
-POSE_SOURCES = ("vo", "file")
+POSE_SOURCES = ("vo", "file")  # label.poses.source
+OCCLUSION_DEPTHS = ("stereo", "ground_truth")  # label.occlusion.depth
 
 
 @dataclass
@@ -42,12 +43,12 @@ class SegmentReport:
 
 
 def pose_file(seq: Sequence, cfg) -> Path:
-    """The pose file label.poses.source=file reads for `seq`; SequenceError when there is none."""
+    """The pose file label.poses.source=file reads for `seq`; InputError when there is none."""
     path = Path(cfg.poses.file.format(name=seq.name)) if cfg.poses.file else seq.poses_path
     if path is None:
-        raise SequenceError(seq.root, "has no poses.txt (or poses/XX.txt) for label.poses.source=file")
+        raise InputError(seq.root, "has no poses.txt (or poses/XX.txt) for label.poses.source=file")
     if not path.is_file():
-        raise SequenceError(path, "is missing (label.poses.file)")
+        raise InputError(path, "is missing (label.poses.file)")
     return path
 
 
@@ -73,7 +74,7 @@ def measured_depth(seq: Sequence, f0: int, disparity: np.ndarray, cfg) -> np.nda
         return depth_from_disparity(disparity, seq.calibration.fx, seq.calibration.baseline_m)
     if cfg.depth == "ground_truth":
         return seq.load_depth(f0)
-    raise ValueError(f"unknown label.occlusion.depth {cfg.depth!r}; valid: stereo, ground_truth")
+    raise ValueError(f"unknown label.occlusion.depth {cfg.depth!r}; valid: {', '.join(OCCLUSION_DEPTHS)}")
 
 
 def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:

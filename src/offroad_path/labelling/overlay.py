@@ -13,8 +13,8 @@ from pathlib import Path
 
 import cv2
 
+from offroad_path.errors import clear_errors
 from offroad_path.sequence.reader import open_sequence
-from offroad_path.utils.cli import clear_errors
 from offroad_path.viz import overlay
 
 

@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from offroad_path.errors import InputError
 from offroad_path.recordings.calibration import StereoRig, camera_info_dict, rig_from_camera_infos
-from offroad_path.sequence.errors import SequenceError
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 INFO_TYPE = "sensor_msgs/msg/CameraInfo"
@@ -51,12 +51,12 @@ class Bag:
 
         self.path = Path(path)
         if not self.path.exists():
-            raise SequenceError(self.path, "is missing (ingest.bag)")
+            raise InputError(self.path, "is missing (ingest.bag)")
         self._reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         try:
             self._reader.open()
         except Exception as e:  # rosbags raises its own error types for every malformed bag
-            raise SequenceError(self.path, f"cannot be read as a ROS 1, ROS 2 or MCAP bag ({type(e).__name__}: {e})") from e
+            raise InputError(self.path, f"cannot be read as a ROS 1, ROS 2 or MCAP bag ({type(e).__name__}: {e})") from e
 
     def __enter__(self) -> Bag:
         return self
@@ -73,15 +73,15 @@ class Bag:
         found = [c for c in self._reader.connections if c.topic == topic]
         if not found:
             listing = ", ".join(f"{t} ({m})" for t, (m, _) in self.topics().items())
-            raise SequenceError(self.path, f"has no topic {topic} ({role}); its topics: {listing}")
+            raise InputError(self.path, f"has no topic {topic} ({role}); its topics: {listing}")
         if found[0].msgtype not in types:
-            raise SequenceError(self.path, f"topic {topic} ({role}) carries {found[0].msgtype}, expected {' or '.join(types)}")
+            raise InputError(self.path, f"topic {topic} ({role}) carries {found[0].msgtype}, expected {' or '.join(types)}")
         return found
 
     def first(self, topic: str, types: tuple[str, ...], role: str) -> Any:
         for connection, _, raw in self._reader.messages(connections=self.connections(topic, types, role)):
             return self._reader.deserialize(raw, connection.msgtype)
-        raise SequenceError(self.path, f"topic {topic} ({role}) has no messages")
+        raise InputError(self.path, f"topic {topic} ({role}) has no messages")
 
     def rig(self, left_info: str, right_info: str) -> StereoRig:
         infos = [
@@ -121,17 +121,17 @@ def decode_image(msg: Any, topic: str, source: Path) -> np.ndarray:
     if hasattr(msg, "format"):  # CompressedImage: JPEG or PNG bytes
         image = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:
-            raise SequenceError(source, f"{topic}: a compressed image ({msg.format!r}) at {stamp_s(msg):.6f} s cannot be decoded")
+            raise InputError(source, f"{topic}: a compressed image ({msg.format!r}) at {stamp_s(msg):.6f} s cannot be decoded")
         if image.ndim == 3 and image.shape[2] == 4:
             image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
         return (image >> 8).astype(np.uint8) if image.dtype == np.uint16 else image
     encoding = msg.encoding.lower()
     if encoding not in CHANNELS:
-        raise SequenceError(source, f"{topic}: image encoding {msg.encoding!r} is not supported ({', '.join(sorted(CHANNELS))})")
+        raise InputError(source, f"{topic}: image encoding {msg.encoding!r} is not supported ({', '.join(sorted(CHANNELS))})")
     wide = encoding in ("mono16", "16uc1")
     row_bytes = msg.width * CHANNELS[encoding] * (2 if wide else 1)
     if msg.step < row_bytes or len(msg.data) < msg.step * msg.height:
-        raise SequenceError(
+        raise InputError(
             source, f"{topic}: a {msg.width}x{msg.height} {encoding} image has {len(msg.data)} bytes (step {msg.step}); it is truncated"
         )
     rows = np.asarray(msg.data, np.uint8)[: msg.step * msg.height].reshape(msg.height, msg.step)[:, :row_bytes]

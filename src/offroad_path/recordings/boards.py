@@ -9,8 +9,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from offroad_path.errors import InputError
 from offroad_path.recordings.calibration import CameraModel, StereoRig
-from offroad_path.sequence.errors import SequenceError
 
 MIN_VIEWS = 6
 
@@ -62,9 +62,9 @@ def calibrate_stereo(left: list[Path], right: list[Path], board: Board, out: Pat
         images = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in (lp, rp)]
         for p, image in zip((lp, rp), images, strict=True):
             if image is None:
-                raise SequenceError(p, "cannot be decoded as an image")
+                raise InputError(p, "cannot be decoded as an image")
             if size is not None and image.shape[::-1] != size:
-                raise SequenceError(p, f"is {image.shape[1]}x{image.shape[0]}, the first view {size[0]}x{size[1]}")
+                raise InputError(p, f"is {image.shape[1]}x{image.shape[0]}, the first view {size[0]}x{size[1]}")
             size = image.shape[::-1]
         found = [board.detect(image) for image in images]
         if found[0] is None or found[1] is None:
@@ -77,7 +77,7 @@ def calibrate_stereo(left: list[Path], right: list[Path], board: Board, out: Pat
         left_points.append(found[0][1][[pick[0][i] for i in common]].astype(np.float32))
         right_points.append(found[1][1][[pick[1][i] for i in common]].astype(np.float32))
     if len(object_points) < MIN_VIEWS:
-        raise SequenceError(
+        raise InputError(
             left[0].parent,
             f"the board is found in both cameras in {len(object_points)} of {len(left)} views; calibration needs {MIN_VIEWS}",
         )

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 import yaml
 
-from offroad_path.sequence.errors import SequenceError
+from offroad_path.errors import InputError
 
 MAX_BASELINE_M = 10.0  # a larger |T| is a calibration in millimetres or board squares, not metres
 FISHEYE_MODELS = ("equidistant", "fisheye")
@@ -38,7 +38,7 @@ class CameraModel:
             return replace(self, size=tuple(size))
         sx, sy = size[0] / self.size[0], size[1] / self.size[1]
         if abs(sx - sy) > 1e-3 * max(sx, sy):
-            raise SequenceError(
+            raise InputError(
                 source, f"was calibrated at {self.size[0]}x{self.size[1]}, but the images are {size[0]}x{size[1]}: not a uniform scale"
             )
         K = self.K.copy()
@@ -59,27 +59,27 @@ class StereoRig:
     def checked(self) -> StereoRig:
         """Refuse rigs the label stage cannot use, naming the calibration."""
         if not np.allclose(self.R.T @ self.R, np.eye(3), atol=1e-4) or np.linalg.det(self.R) < 0:
-            raise SequenceError(self.source, "R is not a rotation matrix")
+            raise InputError(self.source, "R is not a rotation matrix")
         baseline = float(np.linalg.norm(self.T))
         if not 0 < baseline <= MAX_BASELINE_M:
-            raise SequenceError(
+            raise InputError(
                 self.source,
                 f"gives a baseline |T| = {baseline:g}: expected metres in (0, {MAX_BASELINE_M:g}]; "
                 "set ingest.calibration_unit_m (e.g. 0.001 for millimetres)",
             )
         if abs(self.T[0]) < max(abs(self.T[1]), abs(self.T[2])):
-            raise SequenceError(
+            raise InputError(
                 self.source, f"T = {np.round(self.T, 4).tolist()} is not a side-by-side rig: the cameras must be offset mainly along x"
             )
         if self.T[0] > 0:
-            raise SequenceError(
+            raise InputError(
                 self.source, f"T_x = {self.T[0]:g} > 0: the 'right' camera is left of the 'left' one; left and right are swapped"
             )
         for name, cam in (("left", self.left), ("right", self.right)):
             if cam.K[0, 0] <= 0 or cam.K[1, 1] <= 0:
-                raise SequenceError(self.source, f"the {name} camera's focal lengths must be positive")
+                raise InputError(self.source, f"the {name} camera's focal lengths must be positive")
             if cam.fisheye and cam.D.size != 4:
-                raise SequenceError(
+                raise InputError(
                     self.source, f"the {name} camera is equidistant (fisheye) and needs 4 distortion coefficients, has {cam.D.size}"
                 )
         return self
@@ -89,7 +89,7 @@ def read_rig(path: str | Path, right_path: str | Path | None = None, unit_m: flo
     """A stereo calibration file (OpenCV, Kalibr), or two ROS camera_info YAML files."""
     path = Path(path)
     if not path.is_file():
-        raise SequenceError(path, "is missing (ingest.calibration)")
+        raise InputError(path, "is missing (ingest.calibration)")
     if right_path is not None:
         rig = rig_from_camera_infos(_ros_yaml(path), _ros_yaml(Path(right_path)), Path(right_path))
     elif path.suffix.lower() == ".xml" or path.read_text(errors="replace").startswith("%YAML"):
@@ -99,9 +99,9 @@ def read_rig(path: str | Path, right_path: str | Path | None = None, unit_m: flo
         if "cam0" in data and "cam1" in data:
             rig = _kalibr(path, data)
         elif "camera_matrix" in data:
-            raise SequenceError(path, "is one ROS camera_info file: give the right camera's as ingest.right_calibration")
+            raise InputError(path, "is one ROS camera_info file: give the right camera's as ingest.right_calibration")
         else:
-            raise SequenceError(
+            raise InputError(
                 path,
                 "is not a stereo calibration: expected OpenCV FileStorage (K1 D1 K2 D2 R T), Kalibr camchain (cam0, cam1) "
                 "or ROS camera_info YAML",
@@ -117,10 +117,10 @@ def rig_from_camera_infos(left: dict, right: dict, source: Path) -> StereoRig:
     for name, info in (("left", left), ("right", right)):
         K, D, Rr, P = (np.asarray(info[k], np.float64) for k in ("k", "d", "r", "p"))
         if K.size != 9 or Rr.size != 9 or P.size != 12 or not K.any():
-            raise SequenceError(source, f"the {name} CameraInfo has no calibration (K, R, P empty or zero)")
+            raise InputError(source, f"the {name} CameraInfo has no calibration (K, R, P empty or zero)")
         model = str(info.get("distortion_model", "")).lower()
         if model not in FISHEYE_MODELS + PINHOLE_MODELS:
-            raise SequenceError(
+            raise InputError(
                 source, f"the {name} CameraInfo's distortion model {model!r} is not supported (plumb_bob, rational_polynomial, equidistant)"
             )
         size = (int(info["width"]), int(info["height"])) if info.get("width") else None
@@ -128,7 +128,7 @@ def rig_from_camera_infos(left: dict, right: dict, source: Path) -> StereoRig:
         rects.append((Rr.reshape(3, 3), P.reshape(3, 4)))
     (R_l, _), (R_r, P_r) = rects
     if P_r[0, 3] == 0:
-        raise SequenceError(
+        raise InputError(
             source, "the right CameraInfo's P has no baseline (P[0, 3] = 0): the cameras were calibrated one by one, not as a stereo pair"
         )
     t = np.array([P_r[0, 3] / P_r[0, 0], P_r[1, 3] / P_r[1, 1], 0.0])
@@ -147,9 +147,9 @@ def _yaml(path: Path) -> dict:
     try:
         data = yaml.safe_load(path.read_text())
     except (yaml.YAMLError, UnicodeDecodeError) as e:
-        raise SequenceError(path, f"is not valid YAML ({e})") from e
+        raise InputError(path, f"is not valid YAML ({e})") from e
     if not isinstance(data, dict):
-        raise SequenceError(path, "must hold a YAML mapping")
+        raise InputError(path, "must hold a YAML mapping")
     return data
 
 
@@ -157,16 +157,16 @@ def _numbers(path: Path, value: Any, count: int | None, what: str) -> np.ndarray
     try:
         array = np.asarray(value, np.float64).ravel()
     except (TypeError, ValueError) as e:
-        raise SequenceError(path, f"{what} is not a list of numbers") from e
+        raise InputError(path, f"{what} is not a list of numbers") from e
     if (count is not None and array.size != count) or not np.isfinite(array).all():
-        raise SequenceError(path, f"{what} must be {count} finite numbers, has {array.size}")
+        raise InputError(path, f"{what} must be {count} finite numbers, has {array.size}")
     return array
 
 
 def _opencv(path: Path) -> StereoRig:
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     if not fs.isOpened():
-        raise SequenceError(path, "cannot be opened by OpenCV's FileStorage")
+        raise InputError(path, "cannot be opened by OpenCV's FileStorage")
 
     def mat(*names: str) -> np.ndarray:
         for name in names:
@@ -175,7 +175,7 @@ def _opencv(path: Path) -> StereoRig:
                 return np.array([node.at(i).real() for i in range(node.size())])
             if not node.empty():
                 return node.mat()
-        raise SequenceError(path, f"has no {' or '.join(names)}")
+        raise InputError(path, f"has no {' or '.join(names)}")
 
     K1, D1, K2, D2, R, T = mat("K1", "M1"), mat("D1"), mat("K2", "M2"), mat("D2"), mat("R"), mat("T")
     size = None
@@ -194,11 +194,11 @@ def _kalibr(path: Path, data: dict) -> StereoRig:
     for name in ("cam0", "cam1"):
         cam = data[name]
         if not isinstance(cam, dict) or cam.get("camera_model", "pinhole") != "pinhole":
-            raise SequenceError(path, f"{name}: only Kalibr's pinhole camera model is supported")
+            raise InputError(path, f"{name}: only Kalibr's pinhole camera model is supported")
         fu, fv, pu, pv = _numbers(path, cam.get("intrinsics"), 4, f"{name}.intrinsics")
         model = str(cam.get("distortion_model", "radtan"))
         if model not in ("radtan", "equidistant", "none"):
-            raise SequenceError(path, f"{name}: distortion model {model!r} is not supported (radtan, equidistant)")
+            raise InputError(path, f"{name}: distortion model {model!r} is not supported (radtan, equidistant)")
         D = _numbers(path, cam.get("distortion_coeffs", []), None, f"{name}.distortion_coeffs")
         w, h = _numbers(path, cam.get("resolution"), 2, f"{name}.resolution")
         cams.append(CameraModel(np.array([[fu, 0, pu], [0, fv, pv], [0, 0, 1.0]]), D, (int(w), int(h)), model == "equidistant"))
@@ -209,13 +209,13 @@ def _kalibr(path: Path, data: dict) -> StereoRig:
 
 def _ros_yaml(path: Path) -> dict:
     if not path.is_file():
-        raise SequenceError(path, "is missing (ingest.calibration)")
+        raise InputError(path, "is missing (ingest.calibration)")
     data = _yaml(path)
     keys = {"k": "camera_matrix", "d": "distortion_coefficients", "r": "rectification_matrix", "p": "projection_matrix"}
     try:
         info = {k: np.asarray(data[v]["data"], np.float64) for k, v in keys.items()}
     except (KeyError, TypeError) as e:
-        raise SequenceError(path, f"is not a ROS camera_info YAML: no {e} with data") from e
+        raise InputError(path, f"is not a ROS camera_info YAML: no {e} with data") from e
     return info | {
         "width": data.get("image_width"),
         "height": data.get("image_height"),

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.errors import InputError
 from offroad_path.recordings.bags import IMAGE_TYPES, POSE_TYPES, Bag, decode_image, info_topic_for
 from offroad_path.recordings.calibration import StereoRig, read_rig
 from offroad_path.recordings.sync import SyncStats, check_pairing, pair_by_stamp, poses_at
 from offroad_path.recordings.video import estimate_offset, frames, motion_signal, probe
-from offroad_path.sequence.errors import SequenceError
 
 log = logging.getLogger(__name__)
 Frames = Iterator[tuple[float, np.ndarray, np.ndarray]]  # (seconds, raw left, raw right), BGR or grey
@@ -25,7 +25,7 @@ ROS_BODY_TO_OPTICAL = np.array([[0, 0, 1, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 
 
 def _same_size(left: np.ndarray, right: np.ndarray, source: Path) -> tuple[int, int]:
     if left.shape[:2] != right.shape[:2]:
-        raise SequenceError(
+        raise InputError(
             source,
             f"left frames are {left.shape[1]}x{left.shape[0]}, right frames {right.shape[1]}x{right.shape[0]}: "
             "a stereo pair needs one size",
@@ -108,11 +108,11 @@ class VideoSource:
         self.path = self.right.path
         self.inputs = [v.path for v in videos]
         if abs(self.left.fps - self.right.fps) > 0.01 * self.left.fps:
-            raise SequenceError(
+            raise InputError(
                 self.path, f"runs at {self.right.fps:g} fps, {self.left.path.name} at {self.left.fps:g}: record both at one frame rate"
             )
         if self.left.size != self.right.size:
-            raise SequenceError(
+            raise InputError(
                 self.path, f"is {self.right.size[0]}x{self.right.size[1]}, {self.left.path.name} {self.left.size[0]}x{self.left.size[1]}"
             )
         self.input_size = self.left.size
@@ -135,7 +135,7 @@ class VideoSource:
         offset = estimate_offset(*signals, limit)
         if offset is None or offset.correlation < 0.5:
             found = f"the best correlation is {offset.correlation:.2f} at {offset.frames} frames" if offset else "the videos are too short"
-            raise SequenceError(
+            raise InputError(
                 self.path, f"its time offset to {self.left.path.name} cannot be estimated ({found}); give ingest.videos.offset_frames"
             )
         if offset.runner_up > 0.95 * offset.correlation:

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from offroad_path.sequence.errors import SequenceError
+from offroad_path.errors import InputError
 
 SIDES = ("left", "right")
 
@@ -43,7 +43,7 @@ def pair_by_stamp(
     last = dict.fromkeys(SIDES, -math.inf)
     for side, stamp, payload in messages:
         if stamp <= last[side]:
-            raise SequenceError(source, f"{names[side]}: stamps do not rise ({stamp:.6f} s after {last[side]:.6f} s)")
+            raise InputError(source, f"{names[side]}: stamps do not rise ({stamp:.6f} s after {last[side]:.6f} s)")
         last[side] = stamp
         setattr(stats, side, getattr(stats, side) + 1)
         waiting[side].append((stamp, payload))
@@ -66,10 +66,10 @@ def check_pairing(stats: SyncStats, max_unpaired_fraction: float, tolerance_s: f
         nearest = (
             f"; the nearest left and right are {stats.nearest_miss_s * 1000:.1f} ms apart" if math.isfinite(stats.nearest_miss_s) else ""
         )
-        raise SequenceError(source, f"no left/right pair within ingest.sync_tolerance_s = {tolerance_s:g} s ({counts}{nearest})")
+        raise InputError(source, f"no left/right pair within ingest.sync_tolerance_s = {tolerance_s:g} s ({counts}{nearest})")
     fraction = stats.unpaired / (stats.left + stats.right)
     if fraction > max_unpaired_fraction:
-        raise SequenceError(
+        raise InputError(
             source,
             f"{stats.unpaired} of {stats.left + stats.right} images have no partner within {tolerance_s:g} s ({counts}): "
             f"more than ingest.max_unpaired_fraction = {max_unpaired_fraction:g}; "
@@ -95,13 +95,13 @@ class Subsampler:
 def poses_at(times: np.ndarray, poses: np.ndarray, at: np.ndarray, source: Path, topic: str) -> np.ndarray:
     """(M, 4, 4) poses interpolated at `at` (linear position, spherical rotation) from (N, 4, 4)."""
     if len(times) < 2:
-        raise SequenceError(source, f"{topic}: {len(times)} pose message(s); interpolation needs at least 2")
+        raise InputError(source, f"{topic}: {len(times)} pose message(s); interpolation needs at least 2")
     order = np.argsort(times, kind="stable")
     times, poses = times[order], poses[order]
     keep = np.concatenate([[True], np.diff(times) > 0])
     times, poses = times[keep], poses[keep]
     if at[0] < times[0] or at[-1] > times[-1]:
-        raise SequenceError(
+        raise InputError(
             source,
             f"{topic}: the poses cover {times[0]:.3f} to {times[-1]:.3f} s, the frames {at[0]:.3f} to {at[-1]:.3f} s; "
             "record the odometry for the whole drive",

@@ -10,7 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.sequence.errors import SequenceError
+from offroad_path.errors import InputError
 
 SIGNAL_SIZE = (64, 36)  # frames are compared at this size: motion, not detail, aligns the videos
 
@@ -25,15 +25,15 @@ class VideoInfo:
 
 def probe(path: Path) -> VideoInfo:
     if not path.is_file():
-        raise SequenceError(path, "is missing (ingest.videos)")
+        raise InputError(path, "is missing (ingest.videos)")
     capture = cv2.VideoCapture(str(path))
     try:
         ok, frame = capture.read()
         if not capture.isOpened() or not ok:
-            raise SequenceError(path, "cannot be opened as a video by OpenCV (FFmpeg)")
+            raise InputError(path, "cannot be opened as a video by OpenCV (FFmpeg)")
         fps = capture.get(cv2.CAP_PROP_FPS)
         if not fps > 0:
-            raise SequenceError(path, "gives no frame rate")
+            raise InputError(path, "gives no frame rate")
         return VideoInfo(path, fps, int(capture.get(cv2.CAP_PROP_FRAME_COUNT)), (frame.shape[1], frame.shape[0]))
     finally:
         capture.release()

@@ -13,12 +13,12 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path import __version__
+from offroad_path.errors import InputError
 from offroad_path.geometry.path import path_length
 from offroad_path.labelling.footprint import FOOTPRINT_META
 from offroad_path.recordings.rectify import Rectifier, contact_sheet, epipolar_error
 from offroad_path.recordings.sources import BagSource, VideoSource
 from offroad_path.recordings.sync import Subsampler
-from offroad_path.sequence.errors import SequenceError
 from offroad_path.sequence.png import FAST_PNG
 from offroad_path.sequence.poses import poses_to_text
 
@@ -49,7 +49,7 @@ def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) ->
             cv2.imwrite(str(out / sub / name), image, FAST_PNG)
         times.append(t)
     if len(times) < 2:
-        raise SequenceError(
+        raise InputError(
             source.path, f"yields {len(times)} stereo pair(s) after synchronisation and ingest.fps; a sequence needs at least 2"
         )
     times = np.asarray(times)

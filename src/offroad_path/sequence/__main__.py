@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import argparse
 
+from offroad_path.errors import clear_errors
 from offroad_path.geometry.path import path_length
 from offroad_path.sequence.reader import find_sequences, open_sequence
-from offroad_path.utils.cli import clear_errors
 
 
 def describe(path: str) -> list[str]:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offroad_path.sequence.errors import SequenceError
+from offroad_path.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -44,11 +44,11 @@ def read_calibration(path: Path, keys: tuple[str, str] | None) -> StereoCalibrat
     P_left, P_right = (_matrix(path, row, name) for row, name in zip(_projection_rows(path, keys), ("left", "right"), strict=True))
     calib = StereoCalibration(P_left, P_right)
     if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
-        raise SequenceError(path, "left and right matrices have different intrinsics: the pair is not rectified")
+        raise InputError(path, "left and right matrices have different intrinsics: the pair is not rectified")
     if P_left[0, 0] <= 0 or P_left[1, 1] <= 0:
-        raise SequenceError(path, "focal lengths must be positive")
+        raise InputError(path, "focal lengths must be positive")
     if not calib.baseline_m > 0:
-        raise SequenceError(path, f"the right matrix has no baseline (B = {calib.baseline_m:g} m): P_right[0,3] must be -fx*B with B > 0")
+        raise InputError(path, f"the right matrix has no baseline (B = {calib.baseline_m:g} m): P_right[0,3] must be -fx*B with B > 0")
     return calib
 
 
@@ -58,7 +58,7 @@ def _projection_rows(path: Path, keys: tuple[str, str] | None) -> list[str]:
     try:
         lines = [line.strip() for line in path.read_text().splitlines() if line.strip()]
     except (OSError, UnicodeDecodeError) as e:
-        raise SequenceError(path, f"cannot be read as text ({e})") from e
+        raise InputError(path, f"cannot be read as text ({e})") from e
     keyed: dict[str, str] = {}
     unkeyed: list[str] = []
     for line in lines:
@@ -69,15 +69,15 @@ def _projection_rows(path: Path, keys: tuple[str, str] | None) -> list[str]:
             unkeyed.append(line)
     if keys is None and not keyed:
         if len(unkeyed) != 2:
-            raise SequenceError(path, f"must hold two rows of 12 numbers (P_left, P_right), found {len(unkeyed)} rows")
+            raise InputError(path, f"must hold two rows of 12 numbers (P_left, P_right), found {len(unkeyed)} rows")
         return unkeyed
     if keys is None:
         keys = next((k for k in (("P0", "P1"), ("P2", "P3")) if k[0] in keyed and k[1] in keyed), None)
         if keys is None:
-            raise SequenceError(path, f"has keyed rows {sorted(keyed)} but neither P0/P1 nor P2/P3")
+            raise InputError(path, f"has keyed rows {sorted(keyed)} but neither P0/P1 nor P2/P3")
     missing = [k for k in keys if k not in keyed]
     if missing:
-        raise SequenceError(path, f"lacks the row(s) {', '.join(missing)}")
+        raise InputError(path, f"lacks the row(s) {', '.join(missing)}")
     return [keyed[k] for k in keys]
 
 
@@ -85,9 +85,9 @@ def _matrix(path: Path, row: str, name: str) -> np.ndarray:
     try:
         values = np.array([float(v) for v in row.split()])
     except ValueError as e:
-        raise SequenceError(path, f"the {name} matrix has a value that is not a number ({e})") from e
+        raise InputError(path, f"the {name} matrix has a value that is not a number ({e})") from e
     if values.size != 12:
-        raise SequenceError(path, f"the {name} matrix has {values.size} numbers, expected 12")
+        raise InputError(path, f"the {name} matrix has {values.size} numbers, expected 12")
     if not np.isfinite(values).all():
-        raise SequenceError(path, f"the {name} matrix has a non-finite value")
+        raise InputError(path, f"the {name} matrix has a non-finite value")
     return values.reshape(3, 4)

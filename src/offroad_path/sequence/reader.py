@@ -14,8 +14,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from offroad_path.errors import InputError
 from offroad_path.sequence.calibration import StereoCalibration, read_calibration
-from offroad_path.sequence.errors import SequenceError
 from offroad_path.sequence.poses import read_poses
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -55,18 +55,18 @@ class Sequence:
     def load_depth(self, i: int) -> np.ndarray:
         """Ground-truth depth in metres (float32), 0 where there is none."""
         if self.depth is None:
-            raise SequenceError(self.root / "depth", "this sequence has no ground-truth depth")
+            raise InputError(self.root / "depth", "this sequence has no ground-truth depth")
         raw = cv2.imread(str(self.depth[i]), cv2.IMREAD_UNCHANGED)
         if raw is None or raw.dtype != np.uint16 or raw.ndim != 2:
-            raise SequenceError(self.depth[i], "not a single-channel 16-bit PNG")
+            raise InputError(self.depth[i], "not a single-channel 16-bit PNG")
         return raw.astype(np.float32) / 1000.0
 
     def load_semantic(self, i: int) -> np.ndarray:
         if self.semantic is None:
-            raise SequenceError(self.root / "semantic", "this sequence has no semantic maps")
+            raise InputError(self.root / "semantic", "this sequence has no semantic maps")
         raw = cv2.imread(str(self.semantic[i]), cv2.IMREAD_UNCHANGED)
         if raw is None or raw.ndim != 2:
-            raise SequenceError(self.semantic[i], "not a single-channel PNG")
+            raise InputError(self.semantic[i], "not a single-channel PNG")
         return raw
 
 
@@ -74,7 +74,7 @@ def read_image(path: Path, grey: bool = False) -> np.ndarray:
     """An image as RGB (H, W, 3) uint8, or grey (H, W) uint8."""
     image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
     if image is None:
-        raise SequenceError(path, "cannot be decoded as an image")
+        raise InputError(path, "cannot be decoded as an image")
     return image if grey else cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
@@ -84,9 +84,9 @@ def png_size(path: Path) -> tuple[int, int]:
         with open(path, "rb") as f:
             head = f.read(24)
     except OSError as e:
-        raise SequenceError(path, f"cannot be read ({e.strerror})") from e
+        raise InputError(path, f"cannot be read ({e.strerror})") from e
     if len(head) < 24 or head[:8] != PNG_SIGNATURE or head[12:16] != b"IHDR":
-        raise SequenceError(path, "is not a PNG file (bad signature or header)")
+        raise InputError(path, "is not a PNG file (bad signature or header)")
     return struct.unpack(">II", head[16:24])
 
 
@@ -94,16 +94,16 @@ def find_sequences(root: str | Path) -> list[Path]:
     """Sequence folders under root (root itself if it is one), sorted by path."""
     root = Path(root)
     if not root.is_dir():
-        raise SequenceError(root, "is not a directory")
+        raise InputError(root, "is not a directory")
     if (root / "calib.txt").is_file():
         return [root]
     found = sorted(p.parent for p in root.rglob("calib.txt"))
     # A folder of left images with no calibration beside it is a recording, not something to skip.
     for left in sorted(p for layout in LAYOUTS for p in root.rglob(layout[0]) if p.is_dir()):
         if not (left.parent / "calib.txt").is_file() and left.parent not in found:
-            raise SequenceError(left.parent / "calib.txt", f"is missing: {left.parent} has {left.name}/ but no calibration")
+            raise InputError(left.parent / "calib.txt", f"is missing: {left.parent} has {left.name}/ but no calibration")
     if not found:
-        raise SequenceError(root, "holds no sequence (no calib.txt below it)")
+        raise InputError(root, "holds no sequence (no calib.txt below it)")
     return found
 
 
@@ -111,10 +111,10 @@ def open_sequence(root: str | Path) -> Sequence:
     root = Path(root)
     calib_path = root / "calib.txt"
     if not calib_path.is_file():
-        raise SequenceError(calib_path, "is missing")
+        raise InputError(calib_path, "is missing")
     layout = next((layout for layout in LAYOUTS if (root / layout[0]).is_dir()), None)
     if layout is None:
-        raise SequenceError(root, "has no image_l/, image_2/ or image_0/ folder of left images")
+        raise InputError(root, "has no image_l/, image_2/ or image_0/ folder of left images")
     left_dir, right_dir, keys = layout
     calibration = read_calibration(calib_path, keys)
     left, right = _stereo_pairs(root / left_dir, root / right_dir)
@@ -134,9 +134,9 @@ def open_sequence(root: str | Path) -> Sequence:
 def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Path]]:
     left = sorted(left_dir.glob("*.png"))
     if not left:
-        raise SequenceError(left_dir, "holds no PNG images")
+        raise InputError(left_dir, "holds no PNG images")
     if not right_dir.is_dir():
-        raise SequenceError(right_dir, "is missing: a stereo sequence needs right images")
+        raise InputError(right_dir, "is missing: a stereo sequence needs right images")
     right = sorted(right_dir.glob("*.png"))
     left_names = [p.name for p in left]
     right_names = [p.name for p in right]
@@ -148,14 +148,14 @@ def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Pat
             if missing
             else f"has {len(extra)} image(s) with no left partner, first {extra[0]}"
         )
-        raise SequenceError(right_dir, f"{what} ({len(left)} left, {len(right)} right)")
+        raise InputError(right_dir, f"{what} ({len(left)} left, {len(right)} right)")
     return left, [right_dir / name for name in left_names]
 
 
 def check_pixels(path: Path, width: int, height: int, max_pixels: int = MAX_IMAGE_PIXELS) -> None:
     """Refuse, from its header, an image too large to decode safely (a decompression bomb)."""
     if width * height > max_pixels:
-        raise SequenceError(path, f"declares {width}x{height} pixels, more than the {max_pixels:,} allowed; it is not decoded")
+        raise InputError(path, f"declares {width}x{height} pixels, more than the {max_pixels:,} allowed; it is not decoded")
 
 
 def _common_size(paths: list[Path]) -> tuple[int, int]:
@@ -163,7 +163,7 @@ def _common_size(paths: list[Path]) -> tuple[int, int]:
     check_pixels(paths[0], *size)
     for p in paths[1:]:
         if (s := png_size(p)) != size:
-            raise SequenceError(p, f"is {s[0]}x{s[1]}, but {paths[0]} is {size[0]}x{size[1]}: every image must have one size")
+            raise InputError(p, f"is {s[0]}x{s[1]}, but {paths[0]} is {size[0]}x{size[1]}: every image must have one size")
     return size
 
 
@@ -178,11 +178,11 @@ def _read_column(path: Path, expected_rows: int) -> np.ndarray:
     try:
         values = np.loadtxt(path, dtype=np.float64, ndmin=1)
     except ValueError as e:
-        raise SequenceError(path, f"is not one number per line ({e})") from e
+        raise InputError(path, f"is not one number per line ({e})") from e
     if values.ndim != 1 or len(values) != expected_rows:
-        raise SequenceError(path, f"has {len(values)} rows of one number, expected {expected_rows} (one per frame)")
+        raise InputError(path, f"has {len(values)} rows of one number, expected {expected_rows} (one per frame)")
     if not np.isfinite(values).all():
-        raise SequenceError(path, f"has a non-finite value at row {int(np.flatnonzero(~np.isfinite(values))[0]) + 1}")
+        raise InputError(path, f"has a non-finite value at row {int(np.flatnonzero(~np.isfinite(values))[0]) + 1}")
     return values
 
 
@@ -192,9 +192,9 @@ def _read_meta(path: Path) -> dict:
     try:
         meta = json.loads(path.read_text())
     except json.JSONDecodeError as e:
-        raise SequenceError(path, f"is not valid JSON ({e})") from e
+        raise InputError(path, f"is not valid JSON ({e})") from e
     if not isinstance(meta, dict):
-        raise SequenceError(path, "must hold a JSON object")
+        raise InputError(path, "must hold a JSON object")
     return meta
 
 
@@ -204,5 +204,5 @@ def _frames_like(folder: Path, left: list[Path]) -> list[Path] | None:
     paths = [folder / p.name for p in left]
     missing = [p for p in paths if not p.is_file()]
     if missing:
-        raise SequenceError(folder, f"lacks {len(missing)} of the {len(left)} frames, first {missing[0].name}")
+        raise InputError(folder, f"lacks {len(missing)} of the {len(left)} frames, first {missing[0].name}")
     return paths

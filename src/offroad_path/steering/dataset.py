@@ -30,7 +30,7 @@ def steering_transforms(jitter: float, seed: int) -> A.Compose:
 class SteeringDataset(Dataset):
     """Images and angles; with `loss_weights`, each item also carries its frame's weight in the loss.
     Each frame is decoded and resized to (width, height) once and kept, read-only, up to cache_mb
-    (data.cache_mb): at PilotNet's 256 x 136 a frame is 104 KB, and decoding its 512 x 288 PNG
+    (steering.cache_mb): at PilotNet's 256 x 136 a frame is 104 KB, and decoding its 512 x 288 PNG
     every epoch took a quarter of the epoch."""
 
     def __init__(self, frames: list[SteeringFrame], size: tuple[int, int], transform: A.Compose,
@@ -40,22 +40,22 @@ class SteeringDataset(Dataset):
         self.transform = transform
         self.loss_weights = loss_weights
         self.cache_bytes = int(cache_mb * 2**20)
-        self._resized: dict[int, np.ndarray] = {}
+        self.cache: dict[int, np.ndarray] = {}  # index -> resized frame, read-only
 
     def __len__(self) -> int:
         return len(self.frames)
 
     def resized(self, i: int) -> np.ndarray:
         """Frame i's RGB image at (width, height), mirrored where the frame says so."""
-        if (image := self._resized.get(i)) is None:
+        if (image := self.cache.get(i)) is None:
             frame = self.frames[i]
             image = cv2.cvtColor(read(frame.image, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
             if frame.mirrored:
                 image = mirror(image)
             image = cv2.resize(image, self.size, interpolation=cv2.INTER_LINEAR)  # albumentations' Resize, exactly
-            if (len(self._resized) + 1) * image.nbytes <= self.cache_bytes:
+            if (len(self.cache) + 1) * image.nbytes <= self.cache_bytes:
                 image.flags.writeable = False
-                self._resized[i] = image
+                self.cache[i] = image
         return image
 
     def __getitem__(self, key: int | tuple[int, int]) -> dict:
@@ -75,16 +75,16 @@ class SteeringDataModule(L.LightningDataModule):
     batch_size, jitter, seed, balance: see offroad_path.steering.balance), each keeping up to
     cache_mb of resized frames."""
 
-    def __init__(self, parts: dict[str, list[SteeringFrame]], s: DictConfig, cache_mb: float = 0):
+    def __init__(self, parts: dict[str, list[SteeringFrame]], s: DictConfig, seed: int):
         super().__init__()
-        self.parts, self.s, self.cache_mb = parts, s, cache_mb
+        self.parts, self.s, self.seed = parts, s, seed
 
     def _loader(self, part: str, train: bool) -> DataLoader:
         s = self.s
-        transform = steering_transforms(s.jitter if train else 0.0, s.seed)
+        transform = steering_transforms(s.jitter if train else 0.0, self.seed)
         sampling, loss = balance_weights(np.array([f.steering for f in self.parts[part]]), s.balance) if train else (None, None)
-        dataset = SteeringDataset(self.parts[part], (s.width, s.height), transform, loss, self.cache_mb)
-        return DataLoader(dataset, s.batch_size, sampler=EpochSampler(len(dataset), s.seed, weights=sampling) if train else None)
+        dataset = SteeringDataset(self.parts[part], (s.width, s.height), transform, loss, s.cache_mb)
+        return DataLoader(dataset, s.batch_size, sampler=EpochSampler(len(dataset), self.seed, weights=sampling) if train else None)
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train", train=True)

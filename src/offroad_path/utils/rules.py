@@ -72,11 +72,15 @@ def setting(rules: dict | None = None) -> Any:
     return dataclasses.field(default=MISSING, metadata=rules or {})
 
 
-def validate(cfg: DictConfig, schema: type, prefix: str = "") -> None:
-    """Check every value of `cfg` that has a rule in the dataclass `schema`, recursively; values left
-    unset (`???`) or None are skipped. Raises ConfigValueError naming the first bad key."""
+def validate(cfg: DictConfig, schema: type, prefix: str = "", only: Iterable[str] | None = None) -> None:
+    """Check every value of `cfg` that has a rule in the dataclass `schema`, recursively (of the
+    groups `only` and the plain values, when given); values left unset (`???`) or None are skipped.
+    Raises ConfigValueError naming the first bad key."""
     for f in dataclasses.fields(schema):
         key = f"{prefix}{f.name}"
+        nested_schema = f.default_factory is not dataclasses.MISSING
+        if only is not None and nested_schema and f.name not in only:
+            continue
         try:
             value = OmegaConf.select(cfg, f.name, throw_on_missing=True)
         except MissingMandatoryValue:

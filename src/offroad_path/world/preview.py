@@ -11,8 +11,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from offroad_path.errors import clear_errors
 from offroad_path.sequence.reader import Sequence, find_sequences, open_sequence
-from offroad_path.utils.cli import clear_errors
 from offroad_path.viz import colour_depth, colour_semantic
 
 

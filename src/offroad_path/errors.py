@@ -1,0 +1,43 @@
+"""The project's bad-input error, and how every command reports it: one line naming the file or
+key, exit status 2, no traceback. The lowest layer: it imports nothing of the project."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+from omegaconf.errors import MissingMandatoryValue
+
+EXIT_BAD_INPUT = 2
+
+
+class InputError(ValueError):
+    """Bad input: `path` names the file, folder or setting, `problem` what is wrong with it."""
+
+    def __init__(self, path: str | Path, problem: str):
+        self.path = Path(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+    def __reduce__(self):  # rebuilt from both arguments when it crosses from a worker process
+        return type(self), (self.path, self.problem)
+
+
+def missing_extra(command: str, extra: str, error: ImportError) -> InputError:
+    """The error of a command whose optional dependencies (`pip install -e '.[extra]'`) are not installed."""
+    return InputError(command, f"needs the [{extra}] extra ({error.name} is not installed): pip install -e '.[{extra}]'")
+
+
+@contextlib.contextmanager
+def clear_errors() -> Iterator[None]:
+    """Turn bad-input errors into one line naming the file or key, and exit status 2."""
+    try:
+        yield
+    except MissingMandatoryValue as e:  # a required setting (`???` in conf/) was not given
+        print(f"error: {e.full_key} is required: give it on the command line, {e.full_key}=...", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from e
+    except (FileNotFoundError, ValueError) as e:  # InputError, CheckpointError, ConfigValueError are ValueErrors
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from e

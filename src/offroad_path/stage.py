@@ -1,0 +1,115 @@
+"""The stage runner: what every `python -m offroad_path.<stage>` shares. The config composed by
+Hydra, checked against the schemas' rules, cut down to the groups the stage declares, the process's
+threads set, and bad input turned into one line and exit status 2 (offroad_path.errors).
+
+A stage is a function of its config, declared with the groups it reads:
+
+    @reads("train", "data", "model")
+    def train(cfg: DictConfig) -> dict: ...
+
+    main = hydra_stage(train)
+
+Called with the whole config (as its command and the tests call it), the function sees only its
+groups and the shared top-level values (SHARED), resolved and read-only: reading another stage's
+group is an error wherever it is tried, so `--cfg job` and the declaration say what a stage uses.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import signal
+from collections.abc import Callable
+from typing import Any
+
+import hydra
+from omegaconf import DictConfig, OmegaConf
+
+from offroad_path.config import CONF_DIR, register_configs, validate_config
+from offroad_path.errors import clear_errors
+from offroad_path.utils.atomic import remove_unfinished
+from offroad_path.utils.parallel import stop_workers
+from offroad_path.utils.threads import set_threads
+
+log = logging.getLogger("offroad_path")
+
+# Top-level values every stage may read (conf/config.yaml): the training seed, whether an interrupted
+# training run resumes, the process's threads, the run's experiment name (an MLflow tag).
+SHARED = ("seed", "resume", "threads", "experiment_name")
+
+Stage = Callable[[DictConfig], Any]
+
+
+def stage_config(cfg: DictConfig, groups: tuple[str, ...], stage: str) -> DictConfig:
+    """`cfg` cut down to `groups` and SHARED, interpolations resolved, struct and read-only."""
+    if missing := [g for g in groups if g not in cfg]:
+        raise KeyError(f"stage {stage} declares config groups that do not exist: {', '.join(missing)}")
+    kept = {key: OmegaConf.to_container(cfg[key], resolve=True) if isinstance(cfg[key], DictConfig) else cfg[key]
+            for key in (*groups, *SHARED) if key in cfg}  # fmt: skip
+    out = OmegaConf.create(kept)
+    OmegaConf.set_struct(out, True)
+    OmegaConf.set_readonly(out, True)
+    return out
+
+
+def reads(*groups: str) -> Callable[[Stage], Stage]:
+    """Declare the config groups a stage reads: the decorated function sees only those (and SHARED)."""
+
+    def declare(stage: Stage) -> Stage:
+        @functools.wraps(stage)
+        def run(cfg: DictConfig) -> Any:
+            return stage(stage_config(cfg, groups, stage.__name__))
+
+        run.reads = groups  # type: ignore[attr-defined]
+        return run
+
+    return declare
+
+
+def _stop(signum: int, frame: Any) -> None:
+    """On SIGTERM: stop the worker processes, delete unfinished outputs, exit 128 + signal.
+    Training keeps its resume checkpoints (they are not unfinished outputs).
+
+    Done here rather than by raising SystemExit, which Python drops when the signal lands while
+    the main thread runs a finaliser (seen once in CI: the stage then ran on to the end)."""
+    stop_workers()  # the pools first, so that none starts a replacement worker; then wait for them
+    remove_unfinished()
+    os._exit(128 + signum)
+
+
+def objective(result: Any, metric: str | None) -> float | None:
+    """What a Hydra sweeper optimises: `metric` of the stage's returned metrics (None when no
+    search asks for one)."""
+    if metric is None:
+        return None
+    if not isinstance(result, dict) or result.get(metric) is None:
+        found = ", ".join(k for k, v in result.items() if isinstance(v, float)) if isinstance(result, dict) else "none"
+        raise ValueError(f"optimized_metric={metric}: this stage returned no such metric (it has: {found})")
+    return float(result[metric])
+
+
+def run_stage(stage: Stage, cfg: DictConfig) -> Any:
+    """What a stage's command does with its composed config: check every value against the schemas'
+    rules, set the process's threads (`threads`), run, and turn bad input into one line and exit status 2."""
+    with clear_errors():
+        validate_config(cfg, getattr(stage, "reads", None))
+        set_threads(cfg.threads)
+        return stage(cfg)
+
+
+def hydra_stage(stage: Stage) -> Callable[[], None]:
+    """The Hydra entry point of a stage: the project's config, typed by its schemas, and clear
+    errors on bad input."""
+    register_configs()
+
+    @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
+    def main(cfg: DictConfig) -> float | None:
+        # A stop (kill, `dvc` interrupted) deletes the temporary folders of unfinished outputs
+        # instead of leaving them beside the outputs.
+        signal.signal(signal.SIGTERM, _stop)
+        result = run_stage(stage, cfg)
+        with clear_errors():
+            return objective(result, cfg.get("optimized_metric"))
+
+    return main
