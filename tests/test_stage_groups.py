@@ -1,0 +1,86 @@
+"""Each stage reads only the config groups it declares (`@reads(...)`, offroad_path.stage): at run
+time a stage's function sees only those groups, so every test that runs a stage checks the code it
+runs; here, each stage's view of the composed config, its own module's reads, and dvc.yaml's params."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+
+import pytest
+from helpers import ROOT
+from omegaconf.errors import ConfigAttributeError, ReadonlyConfigError
+from test_dvc_deps import STAGES
+
+from offroad_path.stage import SHARED, reads
+
+COMMANDS = ["synthesize", "ingest", "label", "split", "pretrain", "train", "postprocess", "evaluate", "train_steering", "predict", "export"]
+GROUPS = {p.name for p in (ROOT / "conf").iterdir() if p.is_dir()} - {"experiment", "hparams_search"}  # presets, not config keys
+
+
+def stage_of(command: str):
+    module = importlib.import_module(f"offroad_path.{command}")
+    found = [v for v in vars(module).values() if callable(v) and hasattr(v, "reads") and v.__module__ == module.__name__]
+    assert len(found) == 1, f"offroad_path.{command}: one function declared with @reads, found {len(found)}"
+    return found[0]
+
+
+def groups_read(command: str) -> set[str]:
+    """Every `cfg.<group>` and `cfg["<group>"]` in the stage's module, for the config's groups."""
+    read = set()
+    for node in ast.walk(ast.parse((ROOT / "src" / "offroad_path" / f"{command}.py").read_text())):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "cfg":
+            read.add(node.attr)
+        elif isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id == "cfg" \
+                and isinstance(node.slice, ast.Constant):  # fmt: skip
+            read.add(node.slice.value)
+    return read & GROUPS
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_stage_sees_its_groups_and_no_other(command, compose_config):
+    stage = stage_of(command)
+    assert set(stage.reads) <= GROUPS, f"{command} declares groups that conf/ does not have"
+    seen = {}
+
+    @reads(*stage.reads)
+    def probe(cfg):
+        seen.update({key: cfg[key] for key in cfg})
+        for group in sorted(GROUPS - set(stage.reads)):
+            with pytest.raises(ConfigAttributeError):
+                getattr(cfg, group)
+        own = cfg[stage.reads[0]]
+        with pytest.raises(ReadonlyConfigError):
+            own[next(iter(own))] = 1  # no stage rewrites its config
+
+    probe(compose_config())
+    assert set(seen) == set(stage.reads) | set(SHARED)
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_stage_module_reads_only_declared_groups(command):
+    stage = stage_of(command)
+    read = groups_read(command)
+    assert read, f"offroad_path.{command}: found no cfg.<group> in its module"
+    assert read <= set(stage.reads), f"offroad_path.{command} reads {sorted(read - set(stage.reads))} of cfg without declaring them"
+
+
+@pytest.mark.parametrize("name", sorted(STAGES))
+def test_dvc_params_list_the_files_of_every_declared_group(name):
+    spec = STAGES[name]
+    stage = stage_of(spec["cmd"].split()[2].removeprefix("offroad_path."))
+    params = {next(iter(p)) if isinstance(p, dict) else p for p in spec["params"]}
+    params = {p.removesuffix(":") for p in params}
+    assert "conf/config.yaml" in params
+    for group in stage.reads:
+        files = [p for p in params if p.startswith(f"conf/{group}/")]
+        assert files, f"dvc.yaml stage {name} reads {group} but lists no conf/{group}/ file in its params"
+
+
+def test_reading_an_undeclared_group_fails(compose_config):
+    @reads("split")
+    def sloppy(cfg):
+        return cfg.label.out_dir
+
+    with pytest.raises(ConfigAttributeError, match="label"):
+        sloppy(compose_config())
