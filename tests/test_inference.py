@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from offroad_path.errors import InputError
 from offroad_path.export import run_export
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
 from offroad_path.inference.export import export_onnx
@@ -142,3 +143,10 @@ def test_predict_without_an_input_says_what_to_give(trained):
     run = subprocess.run([sys.executable, "-m", "offroad_path.predict", f"predict.checkpoint={trained[0]}"], capture_output=True, text=True)
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1] == "error: predict.input is required: give it on the command line, predict.input=..."
+
+
+def test_export_without_the_onnx_extra_says_which_extra_to_install(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "onnxruntime", None)  # as if `pip install -e .` without [onnx]
+    with pytest.raises(InputError, match=r"needs the \[onnx\] extra \(onnxruntime is not installed\)"):
+        export_onnx(build_model("unet", 2, 0.125), 128, 72, tmp_path / "unet.onnx")
+    assert not (tmp_path / "unet.onnx").exists()

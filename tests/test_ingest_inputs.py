@@ -4,6 +4,7 @@ exit status 2, nothing written."""
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -230,3 +231,10 @@ def test_fisheye_rig_from_kalibr_is_rectified(tmp_path):
     u, v = np.rint(rect[inside]).astype(int).T
     looked_up = np.stack([map_x[v, u], map_y[v, u]], axis=1)
     assert inside.sum() > 100 and np.abs(looked_up - raw[inside]).max() < 1.5  # rounding to a pixel moves the raw point by < 1.5 px
+
+
+def test_a_bag_without_the_ros_extra_says_which_extra_to_install(compose_config, drive, rig, frames, tmp_path, capsys, monkeypatch):
+    bag = write_bag(tmp_path / "drive", "sqlite3", frames, rig)
+    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # as if `pip install -e .` without [ros]: importing it fails
+    line = refused(ingest, bag_config(compose_config, bag, tmp_path / "out"), capsys, tmp_path, "[ros]", "rosbags.highlevel")
+    assert "pip install -e '.[ros]'" in line

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from offroad_path.errors import missing_extra
 from offroad_path.models.base import SegmentationNet
 
 
@@ -31,7 +32,11 @@ class PathConfidence(nn.Module):
 def export_onnx(model: SegmentationNet, width: int, height: int, out: Path, opset: int = 18) -> float:
     """Write `out` for inputs of (batch, 3, height, width) with a dynamic batch, and return the largest
     absolute difference of its path confidence from PyTorch's on a random input of two images."""
-    import onnxruntime as ort
+    try:
+        import onnxruntime as ort
+        import onnxscript  # noqa: F401  (torch.onnx.export's exporter)
+    except ImportError as e:
+        raise missing_extra("export", "onnx", e) from e
 
     wrapped = PathConfidence(model).eval()
     example = torch.randn(2, 3, height, width, generator=torch.Generator().manual_seed(0))

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from offroad_path.data.dataset import transforms
+from offroad_path.errors import missing_extra
 
 
 class PathModel:
@@ -63,7 +64,10 @@ class TorchModel(PathModel):
 class OnnxModel(PathModel):
     def __init__(self, path: str | Path, threads: int | None = None):
         """threads: onnxruntime's intra-op threads (None: its default, one per core)."""
-        import onnxruntime as ort
+        try:
+            import onnxruntime as ort
+        except ImportError as e:
+            raise missing_extra(f"predict of {path}", "onnx", e) from e
 
         path = Path(path)
         if not path.is_file():

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from offroad_path.errors import InputError
+from offroad_path.errors import InputError, missing_extra
 from offroad_path.recordings.calibration import StereoRig, camera_info_dict, rig_from_camera_infos
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -46,8 +46,11 @@ class Bag:
     """An open bag; every error names the bag and the topic."""
 
     def __init__(self, path: str | Path):
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
+        try:
+            from rosbags.highlevel import AnyReader
+            from rosbags.typesys import Stores, get_typestore
+        except ImportError as e:
+            raise missing_extra("ingest of a bag", "ros", e) from e
 
         self.path = Path(path)
         if not self.path.exists():

@@ -7,18 +7,17 @@ every error names the file and says what is wrong with it.
 from __future__ import annotations
 
 import json
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
 from offroad_path.errors import InputError
 from offroad_path.sequence.calibration import StereoCalibration, read_calibration
 from offroad_path.sequence.poses import read_poses
 
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 MAX_IMAGE_PIXELS = 50_000_000  # default cap on an image's declared size (8K is 33 million)
 # (left folder, right folder, calib keys) in order of preference; None keys: two unkeyed rows.
 LAYOUTS = (("image_l", "image_r", None), ("image_2", "image_3", ("P2", "P3")), ("image_0", "image_1", ("P0", "P1")))
@@ -79,15 +78,15 @@ def read_image(path: Path, grey: bool = False) -> np.ndarray:
 
 
 def png_size(path: Path) -> tuple[int, int]:
-    """(width, height) from a PNG header, without decoding the image."""
+    """(width, height) from a PNG header, read by Pillow without decoding the image (about 50 us a
+    file against 16 us for the 24 bytes parsed by hand: nothing beside decoding it)."""
     try:
-        with open(path, "rb") as f:
-            head = f.read(24)
+        with Image.open(path, formats=["PNG"]) as image:
+            return image.size
+    except UnidentifiedImageError as e:
+        raise InputError(path, "is not a PNG file (bad signature or header)") from e
     except OSError as e:
-        raise InputError(path, f"cannot be read ({e.strerror})") from e
-    if len(head) < 24 or head[:8] != PNG_SIGNATURE or head[12:16] != b"IHDR":
-        raise InputError(path, "is not a PNG file (bad signature or header)")
-    return struct.unpack(">II", head[16:24])
+        raise InputError(path, f"cannot be read ({e.strerror or e})") from e
 
 
 def find_sequences(root: str | Path) -> list[Path]:

@@ -9,7 +9,7 @@ purpose, from the `threads` setting:
   training, and so its results (one laptop epoch of SegNet: test IoU 0.721 on 2 threads, 0.614 on
   1), so a fixed count gives the same numbers on every machine.
 - "all": one per core this process may run on (os.sched_getaffinity).
-- "free": the cores not busy right now, from two readings of /proc/stat 0.2 s apart (at least 1).
+- "free": the cores not busy right now, from two readings of the CPU times 0.2 s apart (at least 1).
   For inference, whose output does not depend on the thread count (`predict`'s default).
 """
 
@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
-from pathlib import Path
 
 CHOICES = ("all", "free")
 
@@ -37,29 +35,11 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def cpu_times(stat: Path = Path("/proc/stat")) -> tuple[int, int]:
-    """(idle, total) jiffies of all cores together, from the first line of /proc/stat."""
-    fields = [int(v) for v in stat.read_text().split("\n", 1)[0].split()[1:]]
-    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
-    return idle, sum(fields[:8])  # guest time is already counted in user time
-
-
-def busy_between(before: tuple[int, int], after: tuple[int, int], cores: int) -> float:
-    """Cores busy on average between two cpu_times readings."""
-    (idle0, total0), (idle1, total1) = before, after
-    if total1 <= total0:
-        return 0.0
-    return cores * (1 - (idle1 - idle0) / (total1 - total0))
-
-
 def busy_cores(interval_s: float = 0.2) -> float:
-    """How many cores are busy, over the next interval_s (0 where /proc/stat cannot be read)."""
-    try:
-        before = cpu_times()
-        time.sleep(interval_s)
-        return busy_between(before, cpu_times(), os.cpu_count() or 1)
-    except (OSError, ValueError, IndexError):
-        return 0.0
+    """How many cores are busy on average over the next interval_s (psutil's reading of the system's CPU times)."""
+    import psutil
+
+    return psutil.cpu_percent(interval=interval_s) / 100 * (os.cpu_count() or 1)
 
 
 def thread_count(setting: object) -> int:
