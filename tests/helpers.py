@@ -82,6 +82,27 @@ def _dvc_command(repo: Path, *args: str) -> dict:
     return {"args": [sys.executable, "-m", "dvc", *args], "cwd": repo, "env": env, "text": True}
 
 
+def in_repo(repo: Path, *args: str) -> str:
+    """`python ARGS` in `repo`, on the copy's code (as its dvc stages run)."""
+    command = _dvc_command(repo)
+    run = subprocess.run(**(command | {"args": [sys.executable, *args]}), capture_output=True)
+    assert run.returncode == 0, run.stdout + run.stderr
+    return run.stdout
+
+
+def run_notebook(name: str, root: Path, monkeypatch) -> dict:
+    """Execute a notebook's code cells top to bottom from `root` (a repository with pipeline outputs); its namespace."""
+    import json
+
+    monkeypatch.chdir(root)
+    notebook = json.loads((ROOT / "notebooks" / name).read_text())
+    namespace: dict = {}
+    for cell in notebook["cells"]:
+        if cell["cell_type"] == "code":
+            exec(compile("".join(cell["source"]), name, "exec"), namespace)
+    return namespace
+
+
 def dvc(repo: Path, *args: str) -> str:
     run = subprocess.run(**_dvc_command(repo, *args), capture_output=True)
     assert run.returncode == 0, run.stdout + run.stderr
@@ -102,23 +123,21 @@ def tiny_repo(repo: Path) -> Path:
     """The project's pipeline in a fresh git + DVC repo at `repo`, on a tiny preset."""
     for item in ("conf", "src", "dvc.yaml", ".dvcignore"):
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
-    laptop = repo / "conf" / "experiment" / "laptop.yaml"
-    preset = yaml.safe_load(laptop.read_text())
-    # Tiny but real: 12 frames of two drives, labels of the next 4 m every metre, one epoch.
-    preset["world"].update(frames=12, width=256, height=144)
-    preset["synthesize"]["sequences"] = 2
-    preset["label"].update(distance_m=4.0, stride_m=1.0)
-    preset["split"] = {"block_m": 2.0, "guard_m": 1.0}
-    preset["data"].update(width=64, height=48, batch_size=2)
-    preset["model"]["width"] = 0.125
-    preset["trainer"]["max_epochs"] = 1
-    preset["pretrain"]["max_epochs"] = 1
-    preset["steering"] = {"max_epochs": 1}
-    preset["evaluate"] = {"temporal": {"enabled": False}}  # run three times here; tests/test_temporal.py scores it once
-    laptop.write_text("# @package _global_\n" + yaml.safe_dump(preset))
-    primary = repo / "conf" / "config.yaml"  # one thread per stage: two pipelines run at once (tests/test_pipeline_dvc.py)
-    primary.write_text(primary.read_text().replace("\nthreads: 2\n", "\nthreads: 1\n"))
-    assert "\nthreads: 1\n" in primary.read_text()
+    # Tiny but real: 12 frames of two drives, labels of the next 4 m every metre, one epoch; one
+    # thread per stage, since two pipelines run at once (tests/test_pipeline_dvc.py).
+    tiny = {
+        "world": {"frames": 12, "width": 256, "height": 144}, "synthesize": {"sequences": 2},
+        "label": {"distance_m": 4.0, "stride_m": 1.0}, "split": {"block_m": 2.0, "guard_m": 1.0},
+        "data": {"width": 64, "height": 48, "batch_size": 2}, "model": {"width": 0.125}, "trainer": {"max_epochs": 1},
+        "pretrain": {"max_epochs": 1}, "steering": {"max_epochs": 1},
+        "evaluate": {"temporal": {"enabled": False}},  # run three times here; tests/test_temporal.py scores it once
+        "threads": 1, "experiment_name": "tiny",
+    }  # fmt: skip
+    (repo / "conf" / "experiment" / "tiny.yaml").write_text("# @package _global_\n" + yaml.safe_dump(tiny))
+    primary = repo / "conf" / "config.yaml"
+    text = primary.read_text()
+    assert "\n  - experiment: null" in text
+    primary.write_text(text.replace("\n  - experiment: null", "\n  - experiment: tiny"))
     (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
     git(repo, "init", "-q")
     subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)

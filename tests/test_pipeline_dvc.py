@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import dvc, dvc_at_once, git, tiny_repo
+from helpers import dvc, dvc_at_once, git, in_repo, run_notebook, tiny_repo
 
 from offroad_path.models import MODELS
 from offroad_path.sequence import find_sequences
@@ -35,7 +35,7 @@ def lock_entries(repo: Path) -> dict:
 
 
 @pytest.mark.slow(seconds=240)
-def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
+def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, monkeypatch):
     # A clone elsewhere, deeper, at the same time (on the U-Net column of the grid only, to save
     # the suite's time), must reproduce every stage's hashes: no output depends on the path.
     elsewhere = narrowed(tiny_repo(repo_copy.parent / "another" / "place" / "repo"), "unet")
@@ -85,3 +85,12 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy):
     assert ran == {"pretrain@unet", "train_scratch@unet", "train_pretrained@unet", "postprocess@unet-none", "postprocess@unet-segmentation",
                    "evaluate"}  # fmt: skip
     assert "unet.yaml:lr" in dvc(repo_copy, "exp", "show", "--md")
+    # The notebooks run top to bottom on these outputs. The results notebook also reads the
+    # evaluation's MLflow run, which the tiny preset does not log: one more evaluate logs it.
+    in_repo(repo_copy, "-m", "offroad_path.evaluate", "mlflow.enabled=true")
+    world = run_notebook("01_world_and_labels.ipynb", repo_copy, monkeypatch)
+    assert world["kept"] and world["mask"].any()
+    assert world["panel"].shape == (144, 3 * 256, 3)  # left image, semantic classes, depth of the tiny world's 256 x 144
+    results = run_notebook("02_results.ipynb", repo_copy, monkeypatch)
+    assert len(results["results"]) == 12 and len(results["curves"]) == 6
+    assert results["evaluation"].data.tags.get("stage") == "evaluate"

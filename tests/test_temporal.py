@@ -76,9 +76,10 @@ def test_every_network_scored_on_every_test_block_frame(compose_config, labelled
         shutil.copy(checkpoint, tmp_path / run / "checkpoints" / "best.ckpt")
     cfg = compose_config(f"evaluate.runs_dir={tmp_path}", f"evaluate.labels_dir={labelled_drive}", "split.block_m=4")
     samples = read_manifest(split_dir / "test.csv")
-    rows = score_temporal(cfg, ["unet-none", "unet-copy"], samples)
+    rows = score_temporal(cfg.evaluate, cfg.label, cfg.split.block_m, ["unet-none", "unet-copy"], samples)
     frames = sum(len(b.frames) for b in held_out_blocks([s for s in samples if not s.mirrored], labelled_drive, 4.0))
     assert list(rows) == ["unet-none", "unet-copy"] and rows["unet-none"].frames == frames
     assert rows["unet-none"].method == "U-Net (none)" and rows["unet-none"].iou == rows["unet-copy"].iou  # same weights, same scores
     assert all(0 <= getattr(rows["unet-none"], k) <= 1 for k in ("iou", "iou_filtered", "stability", "stability_filtered"))
-    assert score_temporal(compose_config("evaluate.temporal.enabled=false"), ["unet-none"], samples) is None
+    off = compose_config("evaluate.temporal.enabled=false")
+    assert score_temporal(off.evaluate, off.label, off.split.block_m, ["unet-none"], samples) is None

@@ -16,9 +16,9 @@ from dataclasses import asdict
 
 from omegaconf import DictConfig
 
-from offroad_path.evaluation.report import Report, check_outputs, score_runs, write_report
+from offroad_path.evaluation.report import Section, TestSet, check_outputs, report_metrics, write_report
+from offroad_path.evaluation.sections import Baselines, ByCondition, RealFootage, ResultsTable, SteeringFromPaths, Temporal
 from offroad_path.evaluation.tables import ResultRow, split_run_name
-from offroad_path.evaluation.temporal import score_temporal
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.tracking import stage_run, tracking_uri
 
@@ -27,12 +27,18 @@ log = logging.getLogger("offroad_path.evaluate")
 
 @reads("evaluate", "label", "split", "mlflow")
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
-    check_outputs(cfg.evaluate)
-    report = score_runs(cfg.evaluate)
-    report.temporal = score_temporal(cfg, report.runs, report.samples)
-    write_report(cfg.evaluate, report)
-    log_to_mlflow(cfg, report)
-    return report.table()
+    e = cfg.evaluate
+    check_outputs(e)
+    test = TestSet.read(e)
+    results = ResultsTable()
+    # The report, section by section, in the order of results.md and metrics.json.
+    sections: list[Section] = [results, Baselines(), SteeringFromPaths(e), ByCondition(), Temporal(e, cfg.label, cfg.split.block_m),
+                               RealFootage(e)]  # fmt: skip
+    for section in sections:
+        section.score(test)
+    write_report(e, test, sections, results.table(), results.figures(test, e.figure_cases, e.figure_scale))
+    log_to_mlflow(cfg, sections, results.table())
+    return results.table()
 
 
 def training_runs(cfg: DictConfig) -> dict[str, str]:
@@ -51,17 +57,16 @@ def training_runs(cfg: DictConfig) -> dict[str, str]:
     return found
 
 
-def log_to_mlflow(cfg: DictConfig, report: Report) -> None:
+def log_to_mlflow(cfg: DictConfig, sections: list[Section], table: list[ResultRow]) -> None:
     with stage_run(cfg, "evaluate") as run:
         if run is None:
             return
         import mlflow
 
-        for name, scores in report.metrics().items():  # <run>.raw.iou, baselines.mean_path_prior.iou, ...
+        for name, scores in report_metrics(sections).items():  # <run>.raw.iou, baselines.mean_path_prior.iou, ...
             mlflow.log_metrics({f"{name}.{part}.{k}": v for part, row in scores.items() for k, v in row.items() if v is not None})
         linked = training_runs(cfg)
         mlflow.set_tags({f"training_run.{name}": run_id for name, run_id in linked.items()})
-        table = report.table()
         mlflow.log_table({k: [getattr(r, k) for r in table] for k in asdict(table[0])}, artifact_file="results.json")
         mlflow.log_artifacts(cfg.evaluate.out_dir)
         mlflow.log_artifacts(cfg.evaluate.plots_dir, "precision_recall")

@@ -115,19 +115,22 @@ def filtered(confidence: np.ndarray, block: Block, alpha: float) -> np.ndarray:
     return np.stack(fused)
 
 
-def score_temporal(cfg: DictConfig, runs: list[str], samples: list[Sample]) -> dict[str, TemporalRow] | None:
-    """Rows keyed by run; None when evaluate.temporal.enabled is false or the test set is not synthetic."""
+def score_temporal(
+    e: DictConfig, label: DictConfig, block_m: float, runs: list[str], samples: list[Sample]
+) -> dict[str, TemporalRow] | None:
+    """Rows keyed by run; None when evaluate.temporal.enabled is false or the test set is not
+    synthetic. e: conf/evaluate; label: conf/label (exact labels follow its rules); block_m: the split's blocks."""
     from offroad_path.inference.runners import TorchModel
 
-    t, e = cfg.evaluate.temporal, cfg.evaluate
+    t = e.temporal
     if not t.enabled:
         return None
-    blocks = held_out_blocks([s for s in samples if not s.mirrored], Path(e.labels_dir), cfg.split.block_m)
+    blocks = held_out_blocks([s for s in samples if not s.mirrored], Path(e.labels_dir), block_m)
     if blocks is None:
         log.info("temporal consistency: the test sequences have no true poses and depth; skipped")
         return None
     for block in blocks:
-        load_block(block, cfg.label)
+        load_block(block, label)
     labels = np.concatenate([b.labels for b in blocks])
     rows = {}
     for run in runs:

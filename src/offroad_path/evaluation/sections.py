@@ -1,0 +1,234 @@
+"""The sections of the evaluate stage's report, in the order of results.md and metrics.json: the
+results table (the paper's Table 5.1), the baselines, steering from the paths against PilotNet,
+IoU by condition, temporal consistency, real footage. Each scores a TestSet (see report.py)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+from omegaconf import DictConfig
+
+from offroad_path.data.loading import load_maps
+from offroad_path.evaluation.conditions import ConditionTable, by_condition, read_conditions
+from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases
+from offroad_path.evaluation.metrics import Scores, counts, non_corresponding, per_image_iou, pooled
+from offroad_path.evaluation.real import RealFrames, RealRow, score_real
+from offroad_path.evaluation.report import POSTPROCESSING, TestSet
+from offroad_path.evaluation.steering import SteeringComparison
+from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, markdown_table, network_name, split_run_name
+from offroad_path.evaluation.temporal import TemporalRow, score_temporal
+
+log = logging.getLogger(__name__)
+
+
+def numbers(row) -> dict:
+    """A row's numbers for metrics.json, rounded; None for undefined (JSON has no nan)."""
+    return {k: (None if v != v else round(v, 6)) for k, v in asdict(row).items() if isinstance(v, float)}
+
+
+def method_title(run: str) -> str:
+    model, pretraining = split_run_name(run)
+    return f"{network_name(model)} ({pretraining})"
+
+
+class ResultsTable:
+    """Every run, raw and post-processed, pooled over the test set (the paper's Table 5.1), and the
+    figures that pick from it (good and bad cases, before and after post-processing)."""
+
+    def __init__(self) -> None:
+        self.runs: list[str] = []
+        self.rows: dict[tuple[str, str], ResultRow] = {}
+        self.per_image_iou: dict[tuple[str, str], np.ndarray] = {}
+
+    def score(self, test: TestSet) -> None:
+        self.runs = test.runs
+        for run in test.runs:
+            model, pretraining = split_run_name(run)
+            for pp in POSTPROCESSING:
+                per_image = test.counts[run, pp]
+                ious, s = per_image_iou(per_image), pooled(per_image)
+                self.rows[run, pp] = ResultRow(
+                    network_name(model), pretraining, pp, s.accuracy, s.recall, s.precision, s.iou, float(ious.mean())
+                )
+                self.per_image_iou[run, pp] = ious
+            log.info("%s: IoU %.3f, post-processed %.3f", run, self.rows[run, "no"].iou, self.rows[run, "yes"].iou)
+
+    def table(self) -> list[ResultRow]:
+        return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
+
+    def markdown(self) -> str:
+        return ("# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
+                "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(self.table()))  # fmt: skip
+
+    def metrics(self) -> dict:
+        return {run: {"raw": numbers(self.rows[run, "no"]), "postprocessed": numbers(self.rows[run, "yes"])} for run in self.runs}
+
+    def best_run(self, runs: list[str] | None = None) -> str:
+        return max(runs or self.runs, key=lambda run: self.rows[run, "no"].iou)
+
+    def figures(self, test: TestSet, cases: int, scale: float) -> dict[str, np.ndarray]:
+        return {"good_and_bad_cases.png": self.cases_figure(test, cases, scale),
+                "postprocessing.png": self.postprocessing_figure(test, cases, scale)}  # fmt: skip
+
+    def cases_figure(self, test: TestSet, cases: int, scale: float) -> np.ndarray:
+        """Fig. 8: each network's best run, its best and worst test images by IoU."""
+        rows = []
+        for model in dict.fromkeys(split_run_name(r)[0] for r in self.runs):
+            best = self.best_run([r for r in self.runs if split_run_name(r)[0] == model])
+            ious = self.per_image_iou[best, "no"]
+            order = np.argsort(-ious, kind="stable")
+            for kind, i in [("good", i) for i in order[:cases]] + [("bad", i) for i in order[::-1][:cases]]:
+                rows.append((f"{best} {kind}", test.samples[i], load_maps([test.paths[best, "no"][i]])[0], float(ious[i])))
+        return good_and_bad_cases(rows, scale)
+
+    def postprocessing_figure(self, test: TestSet, cases: int, scale: float) -> np.ndarray:
+        """Fig. 5: the best run's images whose IoU post-processing raised most, and lowered most."""
+        best = self.best_run()
+        before, after = self.per_image_iou[best, "no"], self.per_image_iou[best, "yes"]
+        order = np.argsort(-(after - before), kind="stable")
+        picks = list(dict.fromkeys([*order[:cases], *order[::-1][:cases]]))
+        rows = [(test.samples[i], *load_maps([test.paths[best, "no"][i], test.paths[best, "yes"][i]]), float(before[i]), float(after[i]))
+                for i in picks]  # fmt: skip
+        return before_and_after(rows, scale)
+
+
+class Baselines:
+    """What a model must beat: each run against non-corresponding ground truth, and the mean path prior."""
+
+    def __init__(self) -> None:
+        self.scores: dict[str, Scores] = {}
+
+    def score(self, test: TestSet) -> None:
+        groups = [(s.sequence, s.f0) for s in test.samples]
+        for run in test.runs:
+            if len(set(groups)) < 2:
+                log.warning("the test set holds one frame: no non-corresponding baseline")
+                self.scores[f"non_corresponding.{run}"] = Scores(*[float("nan")] * 4)
+            else:
+                self.scores[f"non_corresponding.{run}"] = non_corresponding(test.predicted[run], test.labels, groups)
+        self.scores["mean_path_prior"] = pooled(prior_counts(test))
+
+    def markdown(self) -> str:
+        rows = [BaselineRow(baseline_name(key), s.accuracy, s.recall, s.precision, s.iou) for key, s in self.scores.items()]
+        return ("\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
+                "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(rows))  # fmt: skip
+
+    def metrics(self) -> dict:
+        return {"baselines": {name: numbers(s) for name, s in self.scores.items()}}
+
+
+def prior_counts(test: TestSet) -> np.ndarray:
+    """Per-image counts of the mean path prior painted on every test frame."""
+    return counts(np.broadcast_to(test.prior, test.labels.shape).astype(np.float32), test.labels, test.threshold)
+
+
+class SteeringFromPaths:
+    """A steering angle from each run's thresholded path (pure pursuit), against PilotNet's and the
+    label's (empty without steering ground truth)."""
+
+    def __init__(self, e: DictConfig) -> None:
+        self.e = e
+        self.comparison = SteeringComparison(e)
+
+    def score(self, test: TestSet) -> None:
+        self.comparison.start(test.samples, test.labels)
+        for run in test.runs:
+            self.comparison.add(run, f"{method_title(run)} + pure pursuit", test.predicted[run])
+
+    def markdown(self) -> str:
+        if not self.comparison.rows:
+            return ""
+        s = self.e.steering_from_paths
+        return (
+            "\n## Path prediction against end-to-end steering\n\nOn the same test frames: a steering angle from each "
+            f"network's thresholded path (its centre line on the ground, pure pursuit at {s.lookahead_m:g} m look-ahead), "
+            "from the ground-truth path label, and PilotNet's. Degrees at the road wheels are the normalised error times the "
+            f"vehicle's steering lock; at the steering wheel, times the steering ratio {s.steering_ratio:g}.\n\n"
+            + markdown_table(self.comparison.table())
+        )
+
+    def metrics(self) -> dict:
+        rows = self.comparison.rows
+        return {"steering_from_paths": {key: numbers(row) for key, row in rows.items()}} if rows else {}
+
+
+class ByCondition:
+    """Pooled IoU of the raw maps per condition of the next 20 m of driving (rendered worlds only)."""
+
+    def __init__(self) -> None:
+        self.table: ConditionTable | None = None
+        self.keys: dict[str, str] = {}  # method title -> its metrics key
+
+    def score(self, test: TestSet) -> None:
+        if (conditions := read_conditions(test.samples)) is None:
+            return
+        per_image = {method_title(run): test.counts[run, "no"] for run in test.runs} | {"mean path prior": prior_counts(test)}
+        self.keys = {method_title(run): run for run in test.runs} | {"mean path prior": "mean_path_prior"}
+        self.table = by_condition(conditions, per_image)
+
+    def markdown(self) -> str:
+        if self.table is None:
+            return ""
+        return (
+            "\n## Results by condition\n\nPooled IoU (raw maps) over the test frames of each group, from what the world knows "
+            "about the next 20 m of driving (conditions.csv of each sequence); a frame can be in several groups. "
+            "The mean path prior shows how hard a group is for a network that ignores the image.\n\n" + self.table.markdown()
+        )
+
+    def metrics(self) -> dict:
+        return {"by_condition": self.table.metrics(self.keys)} if self.table is not None else {}
+
+
+class Temporal:
+    """Every frame of the test blocks, with and without the temporal filter (evaluate.temporal)."""
+
+    def __init__(self, e: DictConfig, label: DictConfig, block_m: float) -> None:
+        self.e, self.label, self.block_m = e, label, block_m
+        self.rows: dict[str, TemporalRow] | None = None
+
+    def score(self, test: TestSet) -> None:
+        self.rows = score_temporal(self.e, self.label, self.block_m, test.runs, test.samples)
+
+    def markdown(self) -> str:
+        if not self.rows:
+            return ""
+        return (
+            "\n## Temporal consistency\n\nEvery frame from the first to the last test frame of each block of driving, labelled "
+            "exactly from the world's true poses and depth (so IoU here is not the table's, which scores VO labels). Filtered: the "
+            "previous fused confidence carried into each frame by the VO pose and stereo depth, then averaged with the current "
+            f"prediction (weight {self.e.temporal.alpha:g} on the current). Stability: the mean IoU of each thresholded path with the "
+            "previous one carried into its frame by the true pose and depth.\n\n" + markdown_table(list(self.rows.values()))
+        )
+
+    def metrics(self) -> dict:
+        return {"temporal": {key: numbers(row) for key, row in self.rows.items()}} if self.rows is not None else {}
+
+
+class RealFootage:
+    """Every run on a labelled real recording (evaluate.real_labels_dir; none by default)."""
+
+    def __init__(self, e: DictConfig) -> None:
+        self.e = e
+        self.rows: dict[str, RealRow] | None = None
+
+    def score(self, test: TestSet) -> None:
+        if self.e.real_labels_dir:
+            frames = RealFrames.read(Path(self.e.real_labels_dir))
+            self.rows = score_real(test.runs, Path(self.e.runs_dir), frames, test.prior, self.e.threshold)
+
+    def markdown(self) -> str:
+        if self.rows is None:
+            return ""
+        return (
+            f"\n## Real footage ({Path(self.e.real_labels_dir).name})\n\nEach network, trained on the synthetic world, run on the "
+            "labelled frames of a real recording (VO labels) and scored against each frame's own label and, averaged over pairs, "
+            "against the other frames' labels. A network that perceives the path scores higher on its own frame; one that paints a "
+            "fixed prior scores about the same on both, like the mean path of the synthetic training labels.\n\n"
+            + markdown_table(list(self.rows.values()))
+        )
+
+    def metrics(self) -> dict:
+        return {"real_footage": {key: numbers(row) for key, row in self.rows.items()}} if self.rows is not None else {}
