@@ -41,6 +41,25 @@ def refused(stage: Callable, cfg, capsys, root: Path, *named: str) -> str:
     return lines[0]
 
 
+def hand_counted_iou(cfg, checkpoint: Path) -> float:
+    """The path IoU of a published checkpoint on the first test batch (all that `fast_dev_run`
+    tests), counted with NumPy from the argmax at the network's input size, as the task's test
+    metric should count it."""
+    import torch
+
+    from offroad_path.data.datamodule import OffroadDataModule
+    from offroad_path.inference.runners import TorchModel
+
+    data = OffroadDataModule.from_config(cfg.data, "path", cfg.seed)
+    data.setup()
+    batch = next(iter(data.test_dataloader()))
+    with torch.no_grad():
+        predicted = TorchModel(checkpoint).task(batch["image"]).argmax(1).numpy() == 1
+    target = batch["target"].numpy() == 1
+    tp, fp, fn = (predicted & target).sum(), (predicted & ~target).sum(), (~predicted & target).sum()
+    return float(tp / (tp + fp + fn)) if tp + fp + fn else 0.0
+
+
 def user_folder(path: Path) -> Path:
     path.mkdir(parents=True)
     (path / "thesis.tex").write_text("months of work")

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 import yaml
+from helpers import hand_counted_iou
 
 from offroad_path.models import MODELS, build_model
 from offroad_path.pretrain import pretrain
@@ -22,8 +23,9 @@ from offroad_path.training.pretrained import from_imagenet_vgg, from_segmentatio
 
 @pytest.mark.parametrize("model", list(MODELS))
 def test_fast_dev_run_trains_tests_and_writes_confidence_maps(compose_config, split_dir, tmp_path, model, tiny_config):
-    metrics = train(tiny_config(tmp_path, f"model={model}", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
-    assert 0.0 <= metrics["test/iou"] <= 1.0
+    cfg = tiny_config(tmp_path, f"model={model}", "trainer.fast_dev_run=true", "mlflow.enabled=false")
+    metrics = train(cfg)
+    assert metrics["test/iou"] == pytest.approx(hand_counted_iou(cfg, tmp_path / "run" / "checkpoints" / "best.ckpt"), abs=1e-6)
     predictions = sorted((tmp_path / "run" / "predictions").rglob("*.npy"))
     test_rows = (split_dir / "test.csv").read_text().splitlines()[1:]
     assert len(predictions) == len(test_rows)
