@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import ast
 import importlib
+import sys
 
 import pytest
 from helpers import ROOT
 from omegaconf.errors import ConfigAttributeError, ReadonlyConfigError
 from test_dvc_deps import STAGES
 
-from offroad_path.stage import SHARED, reads
+from offroad_path.stage import SHARED, check_search_extra, reads
 
 COMMANDS = ["synthesize", "ingest", "label", "split", "pretrain", "train", "postprocess", "evaluate", "train_steering", "predict", "export"]
 GROUPS = {p.name for p in (ROOT / "conf").iterdir() if p.is_dir()} - {"experiment", "hparams_search"}  # presets, not config keys
@@ -84,3 +85,14 @@ def test_reading_an_undeclared_group_fails(compose_config):
 
     with pytest.raises(ConfigAttributeError, match="label"):
         sloppy(compose_config())
+
+
+def test_a_search_without_the_search_extra_says_which_extra_to_install(monkeypatch, capsys):
+    check_search_extra(["model=unet", "hparams_search=null"])  # no search: nothing to check
+    monkeypatch.setitem(sys.modules, "hydra_plugins.hydra_optuna_sweeper", None)  # as if installed without [search]
+    with pytest.raises(SystemExit) as exit_info:
+        check_search_extra(["-m", "hparams_search=path_optuna"])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (
+        "error: hparams_search: needs the [search] extra (hydra-optuna-sweeper is not installed): pip install -e '.[search]'\n"
+    )

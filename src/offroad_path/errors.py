@@ -25,9 +25,9 @@ class InputError(ValueError):
         return type(self), (self.path, self.problem)
 
 
-def missing_extra(command: str, extra: str, error: ImportError) -> InputError:
+def missing_extra(command: str, extra: str, module: str | None) -> InputError:
     """The error of a command whose optional dependencies (`pip install -e '.[extra]'`) are not installed."""
-    return InputError(command, f"needs the [{extra}] extra ({error.name} is not installed): pip install -e '.[{extra}]'")
+    return InputError(command, f"needs the [{extra}] extra ({module} is not installed): pip install -e '.[{extra}]'")
 
 
 @contextlib.contextmanager

@@ -20,6 +20,7 @@ import functools
 import logging
 import os
 import signal
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -27,7 +28,7 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.config import CONF_DIR, register_configs, validate_config
-from offroad_path.errors import clear_errors
+from offroad_path.errors import clear_errors, missing_extra
 from offroad_path.utils.atomic import remove_unfinished
 from offroad_path.utils.parallel import stop_workers
 from offroad_path.utils.threads import set_threads
@@ -98,6 +99,18 @@ def run_stage(stage: Stage, cfg: DictConfig) -> Any:
         return stage(cfg)
 
 
+def check_search_extra(argv: list[str]) -> None:
+    """A search (hparams_search=...) needs the Optuna sweeper, the [search] extra: without it,
+    one line that says so and exit 2, instead of Hydra's missing-config error."""
+    if not any(a.startswith("hparams_search=") and a != "hparams_search=null" for a in argv):
+        return
+    try:
+        import hydra_plugins.hydra_optuna_sweeper  # noqa: F401
+    except ImportError as e:
+        with clear_errors():
+            raise missing_extra("hparams_search", "search", "hydra-optuna-sweeper") from e
+
+
 def hydra_stage(stage: Stage) -> Callable[[], None]:
     """The Hydra entry point of a stage: the project's config, typed by its schemas, and clear
     errors on bad input."""
@@ -112,4 +125,8 @@ def hydra_stage(stage: Stage) -> Callable[[], None]:
         with clear_errors():
             return objective(result, cfg.get("optimized_metric"))
 
-    return main
+    def entry() -> None:
+        check_search_extra(sys.argv[1:])
+        main()
+
+    return entry

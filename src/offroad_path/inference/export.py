@@ -36,7 +36,7 @@ def export_onnx(model: SegmentationNet, width: int, height: int, out: Path, opse
         import onnxruntime as ort
         import onnxscript  # noqa: F401  (torch.onnx.export's exporter)
     except ImportError as e:
-        raise missing_extra("export", "onnx", e) from e
+        raise missing_extra("export", "onnx", e.name) from e
 
     wrapped = PathConfidence(model).eval()
     example = torch.randn(2, 3, height, width, generator=torch.Generator().manual_seed(0))

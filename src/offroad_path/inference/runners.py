@@ -67,7 +67,7 @@ class OnnxModel(PathModel):
         try:
             import onnxruntime as ort
         except ImportError as e:
-            raise missing_extra(f"predict of {path}", "onnx", e) from e
+            raise missing_extra(f"predict of {path}", "onnx", e.name) from e
 
         path = Path(path)
         if not path.is_file():

@@ -50,7 +50,7 @@ class Bag:
             from rosbags.highlevel import AnyReader
             from rosbags.typesys import Stores, get_typestore
         except ImportError as e:
-            raise missing_extra("ingest of a bag", "ros", e) from e
+            raise missing_extra("ingest of a bag", "ros", e.name) from e
 
         self.path = Path(path)
         if not self.path.exists():
