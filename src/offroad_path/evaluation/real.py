@@ -16,7 +16,7 @@ import numpy as np
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.loading import read
 from offroad_path.evaluation.metrics import counts, non_corresponding, pooled
-from offroad_path.evaluation.tables import network_name, split_run_name
+from offroad_path.evaluation.tables import method_title
 
 log = logging.getLogger(__name__)
 
@@ -68,8 +68,7 @@ def score_real(runs: list[str], runs_dir: Path, frames: RealFrames, prior: np.nd
     for run in runs:
         model = TorchModel(runs_dir / run / "checkpoints" / "best.ckpt")
         confidence = model.predict_all(frames.images)
-        name, pretraining = split_run_name(run)
-        rows[run] = real_row(f"{network_name(name)} ({pretraining})", confidence > threshold, frames)
+        rows[run] = real_row(method_title(run), confidence > threshold, frames)
         log.info("%s on %s: IoU %.3f, against other frames' labels %.3f", run, frames.name, rows[run].iou, rows[run].non_corresponding_iou)
     h, w = frames.labels.shape[1:]
     stretched = cv2.resize(prior.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0

@@ -4,6 +4,7 @@ part of results.md and metrics.json. Here: reading the test set, and writing the
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 from dataclasses import dataclass
@@ -61,6 +62,11 @@ class TestSet:
                     curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
         prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
         return cls(list(e.runs), samples, labels, paths, per_image, predicted, curves, prior, e.threshold)
+
+    @functools.cached_property
+    def prior_counts(self) -> np.ndarray:
+        """(N, 4) per-image counts of the mean path prior painted on every test frame (baselines, conditions)."""
+        return counts(np.broadcast_to(self.prior, self.labels.shape).astype(np.float32), self.labels, self.threshold)
 
 
 class Section(Protocol):

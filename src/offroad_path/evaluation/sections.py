@@ -14,11 +14,11 @@ from omegaconf import DictConfig
 from offroad_path.data.loading import load_maps
 from offroad_path.evaluation.conditions import ConditionTable, by_condition, read_conditions
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases
-from offroad_path.evaluation.metrics import Scores, counts, non_corresponding, per_image_iou, pooled
+from offroad_path.evaluation.metrics import Scores, non_corresponding, per_image_iou, pooled
 from offroad_path.evaluation.real import RealFrames, RealRow, score_real
 from offroad_path.evaluation.report import POSTPROCESSING, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
-from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, markdown_table, network_name, split_run_name
+from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, markdown_table, method_title, network_name, split_run_name
 from offroad_path.evaluation.temporal import TemporalRow, score_temporal
 
 log = logging.getLogger(__name__)
@@ -27,11 +27,6 @@ log = logging.getLogger(__name__)
 def numbers(row) -> dict:
     """A row's numbers for metrics.json, rounded; None for undefined (JSON has no nan)."""
     return {k: (None if v != v else round(v, 6)) for k, v in asdict(row).items() if isinstance(v, float)}
-
-
-def method_title(run: str) -> str:
-    model, pretraining = split_run_name(run)
-    return f"{network_name(model)} ({pretraining})"
 
 
 class ResultsTable:
@@ -109,7 +104,7 @@ class Baselines:
                 self.scores[f"non_corresponding.{run}"] = Scores(*[float("nan")] * 4)
             else:
                 self.scores[f"non_corresponding.{run}"] = non_corresponding(test.predicted[run], test.labels, groups)
-        self.scores["mean_path_prior"] = pooled(prior_counts(test))
+        self.scores["mean_path_prior"] = pooled(test.prior_counts)
 
     def markdown(self) -> str:
         rows = [BaselineRow(baseline_name(key), s.accuracy, s.recall, s.precision, s.iou) for key, s in self.scores.items()]
@@ -118,11 +113,6 @@ class Baselines:
 
     def metrics(self) -> dict:
         return {"baselines": {name: numbers(s) for name, s in self.scores.items()}}
-
-
-def prior_counts(test: TestSet) -> np.ndarray:
-    """Per-image counts of the mean path prior painted on every test frame."""
-    return counts(np.broadcast_to(test.prior, test.labels.shape).astype(np.float32), test.labels, test.threshold)
 
 
 class SteeringFromPaths:
@@ -165,7 +155,7 @@ class ByCondition:
     def score(self, test: TestSet) -> None:
         if (conditions := read_conditions(test.samples)) is None:
             return
-        per_image = {method_title(run): test.counts[run, "no"] for run in test.runs} | {"mean path prior": prior_counts(test)}
+        per_image = {method_title(run): test.counts[run, "no"] for run in test.runs} | {"mean path prior": test.prior_counts}
         self.keys = {method_title(run): run for run in test.runs} | {"mean path prior": "mean_path_prior"}
         self.table = by_condition(conditions, per_image)
 

@@ -51,11 +51,16 @@ def network_name(model: str) -> str:
     return (MODELS[model].title if model in MODELS else "") or model
 
 
+def method_title(run: str) -> str:
+    """'unet-segmentation' -> 'U-Net (segmentation)': a run's name in every table."""
+    model, pretraining = split_run_name(run)
+    return f"{network_name(model)} ({pretraining})"
+
+
 def baseline_name(key: str) -> str:
     """'non_corresponding.unet-none' -> 'U-Net (none) against non-corresponding ground truth'."""
     if key.startswith("non_corresponding."):
-        model, pretraining = split_run_name(key.removeprefix("non_corresponding."))
-        return f"{network_name(model)} ({pretraining}) against non-corresponding ground truth"
+        return f"{method_title(key.removeprefix('non_corresponding.'))} against non-corresponding ground truth"
     return {"mean_path_prior": "mean path prior (average training label)"}.get(key, key)
 
 

@@ -26,7 +26,7 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import LabelledSequence, read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.evaluation.metrics import counts, pooled
-from offroad_path.evaluation.tables import network_name, split_run_name
+from offroad_path.evaluation.tables import method_title
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
 from offroad_path.labelling.footprint import Occlusion, footprint_depth, footprint_for, path_mask, swept_polygons
 from offroad_path.postprocessing.temporal import TemporalFilter, warp_previous
@@ -143,9 +143,8 @@ def score_temporal(
             fused.append(smooth)
             steady += stability(confidence > e.threshold, block)
             steady_fused += stability(smooth > e.threshold, block)
-        name, pretraining = split_run_name(run)
         rows[run] = TemporalRow(
-            f"{network_name(name)} ({pretraining})", len(labels), pooled(counts(np.concatenate(raw), labels, e.threshold)).iou,
+            method_title(run), len(labels), pooled(counts(np.concatenate(raw), labels, e.threshold)).iou,
             pooled(counts(np.concatenate(fused), labels, e.threshold)).iou, float(np.mean(steady)), float(np.mean(steady_fused)),
         )  # fmt: skip
         log.info("%s on every test-block frame: IoU %.3f (filtered %.3f), stability %.3f (filtered %.3f)", run, *(
