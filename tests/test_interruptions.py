@@ -103,6 +103,63 @@ def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_dri
         assert not list(out.glob(".labels*"))  # a killed run's temporary folder is gone after the next run
 
 
+def workers_of(pid: int) -> list[int]:
+    """The worker processes a stage started (not multiprocessing's resource tracker)."""
+    found = []
+    for child in Path(f"/proc/{pid}/task/{pid}/children").read_text().split():
+        if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
+            found.append(int(child))
+    return found
+
+
+def label_args(recordings: Path, out: Path) -> list[str]:
+    return ["offroad_path.label", f"label.in_dir={recordings}", f"label.out_dir={out / 'labels'}", f"label.metrics_path={out / 'm.json'}",
+            "label.workers=2", "mlflow.enabled=false"]  # fmt: skip
+
+
+@pytest.mark.slow(seconds=20)
+def test_a_label_worker_killed_from_outside_ends_the_stage_with_its_sequence_named(two_drives, tmp_path):
+    tag = uuid.uuid4().hex
+    env = {**os.environ, "OFFROAD_TEST_TAG": tag}
+    process = subprocess.Popen([sys.executable, "-m", *label_args(two_drives, tmp_path)], cwd=ROOT, env=env, stderr=subprocess.PIPE,
+                               stdout=subprocess.DEVNULL, text=True)  # fmt: skip
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob(".labels.tmp-*/*/label/*.png")) and time.monotonic() < deadline:  # the workers are labelling
+        time.sleep(0.05)
+    workers = workers_of(process.pid)
+    assert len(workers) == 2, workers
+    os.kill(workers[0], signal.SIGKILL)  # as the out-of-memory killer does
+    killed = time.monotonic()
+    _, err = process.communicate(timeout=30)
+    assert time.monotonic() - killed < 30 and process.returncode == 2, err[-2000:]
+    lines = [line for line in err.splitlines() if line.startswith("error: ")]
+    assert len(lines) == 1 and "SIGKILL" in lines[0] and any(str(two_drives / name) in lines[0] for name in ("a", "b")), lines
+    deadline = time.monotonic() + 10
+    while tagged_processes(tag) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not tagged_processes(tag)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no labels, no metrics, no temporary folder, no lock
+
+
+@pytest.mark.slow(seconds=40)
+def test_two_label_runs_into_one_folder_one_refused_one_complete(two_drives, tmp_path):
+    first = subprocess.Popen([sys.executable, "-m", *label_args(two_drives, tmp_path)], cwd=ROOT, stderr=subprocess.PIPE,
+                             stdout=subprocess.DEVNULL, text=True)  # fmt: skip
+    deadline = time.monotonic() + 120
+    while not (tmp_path / ".labels.lock").exists() and first.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    second = subprocess.run([sys.executable, "-m", *label_args(two_drives, tmp_path)], cwd=ROOT, capture_output=True, text=True)
+    _, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err[-2000:]
+    assert second.returncode == 2
+    lines = [line for line in second.stderr.splitlines() if line.startswith("error: ")]
+    assert len(lines) == 1 and f"process {first.pid}" in lines[0] and "label.out_dir" in lines[0], lines
+    summary = json.loads((tmp_path / "labels" / "summary.json").read_text())
+    assert json.loads((tmp_path / "m.json").read_text()) == summary["metrics"]  # the metrics are those of the labels beside them
+    assert summary["metrics"]["labels"] == len(list((tmp_path / "labels").glob("*/label/*.png")))
+    assert not list(tmp_path.glob(".labels.*"))
+
+
 def saved_epochs(out: Path) -> int:
     """Epochs a run under `out` has in its resume checkpoint so far (0 before the first)."""
     for last in out.glob(".resume/run-*/last.ckpt"):

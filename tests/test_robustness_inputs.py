@@ -23,6 +23,7 @@ from offroad_path.postprocess import run_postprocess
 from offroad_path.predict import run_predict
 from offroad_path.pretrain import pretrain
 from offroad_path.train import train
+from offroad_path.utils.atomic import write_text_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -132,7 +133,7 @@ def standing_still(recordings: Path) -> None:
 )
 def test_a_recording_that_gives_no_label_says_why_and_writes_nothing(compose_config, recordings, tmp_path, capsys, damage, says):
     damage(recordings)
-    (tmp_path / "m.json").write_text('{"labels": 374}\n')  # the last good run's metrics stay
+    write_text_atomic(tmp_path / "m.json", '{"labels": 374}\n', "label")  # the last good run's metrics stay
     refused(label, label_cfg(compose_config, recordings, tmp_path), capsys, tmp_path, recordings, "no label could be made", says)
 
 
@@ -191,7 +192,7 @@ def test_a_manifest_listing_a_missing_file_fails_before_training(tiny_config, sp
     split_copy = copy_split(split_dir, tmp_path)
     test_csv = split_copy / "test.csv"
     rows = test_csv.read_text().splitlines()
-    missing = tmp_path / "gone.png"
+    missing = tmp_path / "elsewhere" / "gone.png"
     rows[1] = rows[1].replace(rows[1].split(",")[4], str(missing))
     test_csv.write_text("\n".join(rows) + "\n")
     cfg = tiny_config(tmp_path, f"data.split_dir={split_copy}", "mlflow.enabled=false")
@@ -230,5 +231,5 @@ def test_the_sequence_error_survives_pickling():
 def test_the_cli_runs_the_same_checks(tmp_path):
     run = subprocess.run([sys.executable, "-m", "offroad_path.label", "label.stride_m=0", f"label.out_dir={tmp_path / 'x'}"],
                          capture_output=True, text=True, cwd=ROOT)  # fmt: skip
-    assert run.returncode == 2 and run.stderr.strip() == "error: label.stride_m=0.0: must be a number > 0"
+    assert run.returncode == 2 and run.stderr.strip() == "error: label.stride_m=0.0: must be a number >= 0.05"
     assert not any(tmp_path.iterdir())

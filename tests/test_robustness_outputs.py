@@ -89,7 +89,55 @@ def test_a_stale_temporary_folder_of_a_killed_run_is_removed(compose_config, rec
 def test_export_never_replaces_a_file_or_folder_that_is_not_onnx(compose_config, trained, tmp_path, capsys, name):
     target = tmp_path / name
     target.write_text("mine") if name.endswith(".txt") else user_folder(target)
-    refused(run_export, compose_config(f"export.checkpoint={trained[0]}", f"export.out={target}"), capsys, tmp_path, "export.out", ".onnx")
+    refused(run_export, compose_config(f"export.checkpoint={trained[0]}", f"export.out={target}"), capsys, tmp_path, "export.out", name)
+
+
+# -- 1b. Every output, file or folder, against everything the stage reads -----------------------
+
+
+def test_label_metrics_path_on_a_recordings_calibration(compose_config, recordings, tmp_path, capsys):
+    calib = recordings / "drive" / "calib.txt"
+    cfg = label_cfg(compose_config, recordings, tmp_path, f"label.metrics_path={calib}")
+    refused(label, cfg, capsys, tmp_path, f"label.metrics_path={calib}", "overlaps the input")
+
+
+def test_evaluate_metrics_path_on_the_splits_manifest(compose_config, split_dir, tmp_path, capsys):
+    manifest = split_dir / "train.csv"
+    cfg = compose_config(f"evaluate.metrics_path={manifest}", f"evaluate.train_manifest={manifest}", f"evaluate.out_dir={tmp_path / 'e'}",
+                         f"evaluate.plots_dir={tmp_path / 'p'}")  # fmt: skip
+    refused(evaluate, cfg, capsys, split_dir, f"evaluate.metrics_path={manifest}", "overlaps the input")
+
+
+def test_evaluate_out_dir_on_its_label_run(compose_config, labelled_drive, split_dir, tmp_path, capsys):
+    cfg = compose_config(f"evaluate.out_dir={labelled_drive}", f"evaluate.labels_dir={labelled_drive}",
+                         f"evaluate.train_manifest={split_dir / 'train.csv'}", f"evaluate.plots_dir={tmp_path / 'p'}")  # fmt: skip
+    refused(evaluate, cfg, capsys, labelled_drive, f"evaluate.out_dir={labelled_drive}", "overlaps the input")
+
+
+def test_train_out_dir_on_the_label_run_its_manifests_read(tiny_config, labelled_drive, tmp_path, capsys):
+    cfg = tiny_config(tmp_path, f"train.out_dir={labelled_drive}", "mlflow.enabled=false")
+    refused(train, cfg, capsys, labelled_drive, f"train.out_dir={labelled_drive}", f"overlaps the input {labelled_drive}")
+
+
+def test_predict_never_replaces_another_stages_output(compose_config, trained, frames_folder, labelled_drive, capsys):
+    cfg = compose_config(f"predict.checkpoint={trained[0]}", f"predict.input={frames_folder}", f"predict.out_dir={labelled_drive}")
+    refused(run_predict, cfg, capsys, labelled_drive, f"predict.out_dir={labelled_drive}", "output of the label stage")
+
+
+def test_a_metrics_file_the_project_did_not_write_is_kept(compose_config, recordings, tmp_path, capsys):
+    (tmp_path / "m.json").write_text("my notes")
+    refused(label, label_cfg(compose_config, recordings, tmp_path), capsys, tmp_path, "label.metrics_path", "not written by this project")
+
+
+def test_a_metrics_path_below_a_file_is_refused_before_any_work(compose_config, recordings, tmp_path, capsys):
+    (tmp_path / "notes").write_text("mine")
+    cfg = label_cfg(compose_config, recordings, tmp_path, f"label.metrics_path={tmp_path / 'notes' / 'metrics' / 'm.json'}")
+    refused(label, cfg, capsys, tmp_path, "label.metrics_path", "is not a folder")
+
+
+def test_outputs_of_one_stage_may_not_overlap_each_other(compose_config, recordings, tmp_path, capsys):
+    cfg = label_cfg(compose_config, recordings, tmp_path, f"label.metrics_path={tmp_path / 'labels' / 'm.json'}")
+    refused(label, cfg, capsys, tmp_path, "label.metrics_path", "overlaps label.out_dir")
 
 
 # -- 2. Checkpoints: weights only, and a clear line for anything else ------------------------------

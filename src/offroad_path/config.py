@@ -214,7 +214,7 @@ class LabelConfig:
     metrics_path: str = MISSING
     distance_m: float = setting(positive())
     strategy: str = setting(one_of(registry("labelling.frame_selection", "STRATEGIES")))
-    stride_m: float = setting(positive())
+    stride_m: float = setting(at_least(0.05))  # denser than the frames gives no more labels; the stage also wants it <= distance_m
     min_motion_m: float = setting(at_least(0))
     poses: PosesConfig = field(default_factory=PosesConfig)
     occlusion: OcclusionConfig = field(default_factory=OcclusionConfig)

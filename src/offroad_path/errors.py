@@ -38,6 +38,18 @@ def clear_errors() -> Iterator[None]:
     except MissingMandatoryValue as e:  # a required setting (`???` in conf/) was not given
         print(f"error: {e.full_key} is required: give it on the command line, {e.full_key}=...", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT) from e
-    except (FileNotFoundError, ValueError) as e:  # InputError, CheckpointError, ConfigValueError are ValueErrors
-        print(f"error: {e}", file=sys.stderr)
+    except OSError as e:  # a missing file, a full disk, a folder that may not be written
+        print(f"error: {e.filename}: {e.strerror}" if e.filename and e.strerror else f"error: {e}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT) from e
+    except ValueError as e:  # InputError, CheckpointError, ConfigValueError are ValueErrors
+        print(f"error: {one_line(e)}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from e
+
+
+def one_line(error: BaseException) -> str:
+    """An error's message and its cause's first line, on one line (Hydra's and OmegaConf's span several)."""
+    text = " ".join(line.strip() for line in str(error).split("\nConfig search path")[0].splitlines() if line.strip())
+    cause = error.__cause__
+    if cause is not None and str(cause).strip() and str(cause).strip() not in text:
+        text += f" ({str(cause).strip().splitlines()[0]})"
+    return text

@@ -16,7 +16,7 @@ from dataclasses import asdict
 
 from omegaconf import DictConfig
 
-from offroad_path.evaluation.report import Section, TestSet, check_outputs, report_metrics, write_report
+from offroad_path.evaluation.report import Section, TestSet, outputs, report_metrics, write_report
 from offroad_path.evaluation.sections import Baselines, ByCondition, RealFootage, ResultsTable, SteeringFromPaths, Temporal
 from offroad_path.evaluation.tables import ResultRow, split_run_name
 from offroad_path.stage import hydra_stage, reads
@@ -25,10 +25,9 @@ from offroad_path.utils.tracking import stage_run, tracking_uri
 log = logging.getLogger("offroad_path.evaluate")
 
 
-@reads("evaluate", "label", "split", "mlflow")
+@reads("evaluate", "label", "split", "mlflow", writes=outputs)
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
     e = cfg.evaluate
-    check_outputs(e)
     test = TestSet.read(e)
     results = ResultsTable()
     # The report, section by section, in the order of results.md and metrics.json.

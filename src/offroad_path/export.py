@@ -19,17 +19,22 @@ from omegaconf import DictConfig
 from offroad_path.inference.export import export_onnx
 from offroad_path.inference.runners import TorchModel
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.utils.atomic import UnsafeOutputError
+from offroad_path.utils.atomic import UnsafeOutputError, sidecar, write_text_atomic
+from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger("offroad_path.export")
 
 
-@reads("export")
+def outputs(cfg: DictConfig) -> Outputs:
+    return Outputs("export", files={"export.out": cfg.export.out}, inputs=[cfg.export.checkpoint])
+
+
+@reads("export", writes=outputs)
 def run_export(cfg: DictConfig) -> float:
     e = cfg.export
     out = Path(e.out)
-    if out.suffix != ".onnx" or out.is_dir() or out.resolve() == Path(e.checkpoint).resolve():
-        raise UnsafeOutputError(f"export.out={out}: must be a .onnx file path (not a folder, not the checkpoint); nothing is replaced")
+    if out.suffix != ".onnx":
+        raise UnsafeOutputError(f"export.out={out}: must be a .onnx file path; nothing is written")
     model = TorchModel(e.checkpoint)
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.tmp-", suffix=".onnx", dir=out.parent)
@@ -38,6 +43,7 @@ def run_export(cfg: DictConfig) -> float:
         difference = export_onnx(model.task.model, model.width, model.height, Path(tmp), e.opset)
         if difference > e.tolerance:
             raise ValueError(f"{e.checkpoint}: the ONNX export differs from PyTorch by {difference:.2e} (> {e.tolerance:g})")
+        write_text_atomic(sidecar(out), "export\n")
         os.replace(tmp, out)
     finally:
         Path(tmp).unlink(missing_ok=True)

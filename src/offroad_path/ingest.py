@@ -24,7 +24,8 @@ from offroad_path.recordings.bags import Bag
 from offroad_path.recordings.sources import open_source
 from offroad_path.recordings.writer import write_sequence
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.utils.atomic import atomic_directory, check_output_dir
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger("offroad_path.ingest")
 
@@ -34,7 +35,13 @@ def list_topics(bag: str) -> list[str]:
         return [f"{topic}  {msgtype}  {count} messages" for topic, (msgtype, count) in opened.topics().items()]
 
 
-@reads("ingest")
+def outputs(cfg: DictConfig) -> Outputs:
+    c = cfg.ingest
+    inputs = (c.bag, c.videos.left, c.videos.right, c.calibration, c.right_calibration)
+    return Outputs("ingest", folders={} if c.list_topics else {"ingest.out_dir": c.out_dir}, inputs=inputs)
+
+
+@reads("ingest", writes=outputs)
 def ingest(cfg: DictConfig) -> dict:
     c = cfg.ingest
     if c.list_topics:
@@ -44,11 +51,9 @@ def ingest(cfg: DictConfig) -> dict:
             print(line)
         return {}
     out_dir = Path(c.out_dir)
-    inputs = [p for p in (c.bag, c.videos.left, c.videos.right, c.calibration, c.right_calibration) if p is not None]
-    check_output_dir(out_dir, "ingest.out_dir", inputs)
     source = open_source(c)
     try:
-        with atomic_directory(out_dir, "ingest", inputs, key="ingest.out_dir") as tmp:
+        with atomic_directory(out_dir, "ingest", key="ingest.out_dir") as tmp:
             meta = write_sequence(source, c, tmp)
     finally:
         source.close()

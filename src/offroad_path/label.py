@@ -23,8 +23,10 @@ from offroad_path.labelling.labeller import check_inputs, label_sequence
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
+from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.parallel import map_processes
+from offroad_path.utils.rules import ConfigValueError
 from offroad_path.utils.tracking import stage_run
 
 log = logging.getLogger("offroad_path.label")
@@ -56,17 +58,23 @@ def drift_metrics(drifts: list[dict]) -> dict[str, float]:
     }
 
 
-@reads("label", "mlflow")
+def outputs(cfg: DictConfig) -> Outputs:
+    c = cfg.label
+    return Outputs("label", folders={"label.out_dir": c.out_dir}, files={"label.metrics_path": c.metrics_path}, inputs=[c.in_dir])
+
+
+@reads("label", "mlflow", writes=outputs)
 def label(cfg: DictConfig) -> dict:
     in_dir, out_dir = Path(cfg.label.in_dir), Path(cfg.label.out_dir)
-    check_output_dir(out_dir, "label.out_dir", [in_dir])
+    if cfg.label.strategy == "stride" and cfg.label.stride_m > cfg.label.distance_m:
+        raise ConfigValueError(f"label.stride_m={cfg.label.stride_m:g}: must be at most label.distance_m ({cfg.label.distance_m:g})")
     roots = find_sequences(in_dir)
     for root in roots:  # validate everything before any work
         check_inputs(open_sequence(root), cfg.label)
     names = sequence_names(roots, in_dir)
-    with stage_run(cfg, "label") as run, atomic_directory(out_dir, "label", [in_dir], key="label.out_dir") as tmp:
+    with stage_run(cfg, "label") as run, atomic_directory(out_dir, "label", key="label.out_dir") as tmp:
         jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
-        summaries = map_processes(_label_job, jobs, cfg.label.workers)
+        summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots])
         drifts = [s["drift"] for s in summaries if s["drift"]]
         metrics = {
             "sequences": len(summaries),
@@ -90,7 +98,7 @@ def label(cfg: DictConfig) -> dict:
 
             mlflow.log_metrics(metrics)
             mlflow.log_artifact(str(tmp / "summary.json"))
-    write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n")  # only once the labels are in place
+    write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n", "label")  # only once the labels are in place
     log.info(
         "labelled %d sequences: %d segments kept, %d dropped, %d labels written to %s%s",
         metrics["sequences"], metrics["labels"], metrics["segments_dropped"], metrics["labels"], out_dir,

@@ -18,25 +18,31 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.data.loading import load_depth, load_maps
-from offroad_path.data.manifest import prediction_name, read_predictions_manifest, write_predictions_manifest
+from offroad_path.data.manifest import manifest_folders, prediction_name, read_predictions_manifest, write_predictions_manifest
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.utils.atomic import atomic_directory, check_output_dir
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger("offroad_path.postprocess")
 
 BATCH = 64  # maps in memory at once
 
 
-@reads("postprocess")
+def outputs(cfg: DictConfig) -> Outputs:
+    c = cfg.postprocess
+    inputs = [c.predictions_dir, *manifest_folders(Path(c.predictions_dir) / "manifest.csv")]
+    return Outputs("postprocess", folders={"postprocess.out_dir": c.out_dir}, inputs=inputs)
+
+
+@reads("postprocess", writes=outputs)
 def run_postprocess(cfg: DictConfig) -> int:
     c = cfg.postprocess
     params = PostprocessParams.from_config(c)
     out_dir = Path(c.out_dir)
-    check_output_dir(out_dir, "postprocess.out_dir", [c.predictions_dir])
     rows = read_predictions_manifest(Path(c.predictions_dir) / "manifest.csv")
     written, seconds = [], 0.0
-    with atomic_directory(out_dir, "postprocess", [c.predictions_dir], key="postprocess.out_dir") as tmp:
+    with atomic_directory(out_dir, "postprocess", key="postprocess.out_dir") as tmp:
         for start in range(0, len(rows), BATCH):
             batch = rows[start : start + BATCH]
             maps = load_maps([path for _, path in batch])  # (B, H, W)

@@ -27,7 +27,8 @@ from offroad_path.inference.runners import load_model
 from offroad_path.inference.sources import open_source
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.utils.atomic import atomic_directory, check_output_dir
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.threads import set_threads
 from offroad_path.utils.tracking import tracking_uri
 from offroad_path.viz import overlay
@@ -46,11 +47,14 @@ def write_frame(tmp: Path, name: str, confidence: np.ndarray, shown: np.ndarray,
         video.write(shown)
 
 
-@reads("predict", "postprocess", "label", "mlflow")
+def outputs(cfg: DictConfig) -> Outputs:
+    p = cfg.predict
+    return Outputs("predict", folders={"predict.out_dir": p.out_dir}, inputs=[p.input, p.checkpoint])
+
+
+@reads("predict", "postprocess", "label", "mlflow", writes=outputs)
 def run_predict(cfg: DictConfig) -> dict:
     p, pp = cfg.predict, cfg.postprocess
-    inputs = [p.input] + ([p.checkpoint] if p.checkpoint else [])
-    check_output_dir(p.out_dir, "predict.out_dir", inputs)
     threads = set_threads(p.threads)  # "free" by default: a busy machine gets fewer threads, not a collapse
     model = load_model(p.checkpoint, p.run_id, tracking_uri(cfg.mlflow), p.device, threads)
     source = open_source(p.input, cfg.label.disparity if p.postprocess else None, p.max_frames, p.max_image_pixels)
@@ -58,7 +62,7 @@ def run_predict(cfg: DictConfig) -> dict:
     frames, model_seconds, start = 0, 0.0, time.perf_counter()
     # Encoding the PNGs and the video took as long as the network: a writer thread does it (OpenCV
     # lets go of the GIL) while the next frame is read and run; one thread keeps the video in order.
-    with atomic_directory(p.out_dir, "predict", inputs, key="predict.out_dir") as tmp, ThreadPoolExecutor(1) as writer:
+    with atomic_directory(p.out_dir, "predict", key="predict.out_dir") as tmp, ThreadPoolExecutor(1) as writer:
         (tmp / "confidence").mkdir()
         (tmp / "overlay").mkdir()
         video, pending = None, deque()

@@ -13,13 +13,13 @@ import logging
 from omegaconf import DictConfig
 
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.training.run import fit_segmentation
+from offroad_path.training.run import fit_segmentation, segmentation_outputs
 from offroad_path.world.classes import CLASS_NAMES
 
 log = logging.getLogger("offroad_path.pretrain")
 
 
-@reads("pretrain", "data", "model", "trainer", "callbacks", "logger", "mlflow")
+@reads("pretrain", "data", "model", "trainer", "callbacks", "logger", "mlflow", writes=segmentation_outputs("pretrain"))
 def pretrain(cfg: DictConfig) -> dict:
     metrics = fit_segmentation(cfg, "pretrain", target="semantic")
     log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])

@@ -14,11 +14,12 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from offroad_path.data.labels import read_label_run
+from offroad_path.data.labels import label_run_folders, read_label_run
 from offroad_path.data.manifest import Sample, data_root, write_manifest
 from offroad_path.data.splitting import Frame, split_frames
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.utils.atomic import atomic_directory, check_output_dir
+from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger("offroad_path.split")
 
@@ -37,18 +38,20 @@ def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int]
     return frames, samples
 
 
-@reads("split")
+def outputs(cfg: DictConfig) -> Outputs:
+    return Outputs("split", folders={"split.out_dir": cfg.split.out_dir}, inputs=label_run_folders(cfg.split.labels_dir))
+
+
+@reads("split", writes=outputs)
 def split(cfg: DictConfig) -> dict:
     c = cfg.split
-    check_output_dir(c.out_dir, "split.out_dir", [c.labels_dir])
     frames, samples = labelled_frames(Path(c.labels_dir))
     if not frames:
         raise ValueError(f"{c.labels_dir}: holds no labels to split")
     parts, guarded = split_frames(frames, c)
     counts = {}
     listed = [c.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
-    recordings = sorted({str(Path(sample.image).parents[1]) for sample in samples.values()})  # <sequence>/image_l/NNNNNN.png
-    with atomic_directory(c.out_dir, "split", [c.labels_dir, *recordings], key="split.out_dir") as tmp:
+    with atomic_directory(c.out_dir, "split", key="split.out_dir") as tmp:
         for name, part in parts.items():
             rows = []
             for frame in part:

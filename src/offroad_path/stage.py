@@ -25,11 +25,14 @@ from collections.abc import Callable
 from typing import Any
 
 import hydra
+from hydra.errors import HydraException
 from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
 from offroad_path.config import CONF_DIR, register_configs, validate_config
-from offroad_path.errors import clear_errors, missing_extra
+from offroad_path.errors import EXIT_BAD_INPUT, clear_errors, missing_extra, one_line
 from offroad_path.utils.atomic import remove_unfinished
+from offroad_path.utils.outputs import Outputs, claimed, release_locks
 from offroad_path.utils.parallel import stop_workers
 from offroad_path.utils.threads import set_threads
 
@@ -54,15 +57,22 @@ def stage_config(cfg: DictConfig, groups: tuple[str, ...], stage: str) -> DictCo
     return out
 
 
-def reads(*groups: str) -> Callable[[Stage], Stage]:
-    """Declare the config groups a stage reads: the decorated function sees only those (and SHARED)."""
+def reads(*groups: str, writes: Callable[[DictConfig], Outputs] | None = None) -> Callable[[Stage], Stage]:
+    """Declare the config groups a stage reads: the decorated function sees only those (and SHARED).
+    `writes` gives, from that config, the outputs the run writes and every input it reads: they are
+    checked against the output rule (utils.outputs) and locked for the run, before any work."""
 
     def declare(stage: Stage) -> Stage:
         @functools.wraps(stage)
         def run(cfg: DictConfig) -> Any:
-            return stage(stage_config(cfg, groups, stage.__name__))
+            own = stage_config(cfg, groups, stage.__name__)
+            if writes is None:
+                return stage(own)
+            with claimed(writes(own)):
+                return stage(own)
 
         run.reads = groups  # type: ignore[attr-defined]
+        run.writes = writes  # type: ignore[attr-defined]
         return run
 
     return declare
@@ -74,8 +84,9 @@ def _stop(signum: int, frame: Any) -> None:
 
     Done here rather than by raising SystemExit, which Python drops when the signal lands while
     the main thread runs a finaliser (seen once in CI: the stage then ran on to the end)."""
-    stop_workers()  # the pools first, so that none starts a replacement worker; then wait for them
+    stop_workers()
     remove_unfinished()
+    release_locks()
     os._exit(128 + signum)
 
 
@@ -127,6 +138,13 @@ def hydra_stage(stage: Stage) -> Callable[[], None]:
 
     def entry() -> None:
         check_search_extra(sys.argv[1:])
-        main()
+        # Hydra prints its own errors (a mistyped key, a bad override, a search's bad range) over
+        # several lines and exits 1; told to raise them instead, they become one line and exit 2.
+        os.environ.setdefault("HYDRA_FULL_ERROR", "1")
+        try:
+            main()
+        except (HydraException, OmegaConfBaseException, ValueError) as e:
+            print(f"error: {one_line(e)}", file=sys.stderr)
+            raise SystemExit(EXIT_BAD_INPUT) from e
 
     return entry

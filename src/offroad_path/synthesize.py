@@ -12,11 +12,16 @@ from omegaconf import DictConfig
 
 from offroad_path.stage import hydra_stage, log, reads
 from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.outputs import Outputs
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.record import record_sequences
 
 
-@reads("synthesize", "world")
+def outputs(cfg: DictConfig) -> Outputs:
+    return Outputs("synthesize", folders={"synthesize.out_dir": cfg.synthesize.out_dir})
+
+
+@reads("synthesize", "world", writes=outputs)
 def synthesize(cfg: DictConfig) -> list[dict]:
     out_dir = Path(cfg.synthesize.out_dir)
     with atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:

@@ -20,13 +20,16 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from offroad_path.data.labels import label_run_folders
+from offroad_path.data.manifest import manifest_folders
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
 from offroad_path.steering.frames import PARTS, steering_split
 from offroad_path.steering.task import SteeringTask
 from offroad_path.training.run import RunSpec, fit, run_identity, training_logger
-from offroad_path.utils.atomic import check_output_dir, write_text_atomic
+from offroad_path.utils.atomic import write_text_atomic
+from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger("offroad_path.train_steering")
 
@@ -41,11 +44,16 @@ def predict(task: SteeringTask, loader) -> tuple[np.ndarray, np.ndarray]:
     return torch.cat(true).numpy(), torch.cat(predicted).numpy()
 
 
-@reads("steering", "split", "trainer", "callbacks", "logger", "mlflow")
+def outputs(cfg: DictConfig) -> Outputs:
+    s = cfg.steering
+    inputs = [*label_run_folders(s.labels_dir), s.split_dir, *manifest_folders(Path(s.split_dir) / "train.csv")]
+    files = {"steering.metrics_path": s.metrics_path, "steering.plots_path": s.plots_path}
+    return Outputs("train_steering", folders={"steering.out_dir": s.out_dir}, files=files, inputs=inputs)
+
+
+@reads("steering", "split", "trainer", "callbacks", "logger", "mlflow", writes=outputs)
 def train_steering(cfg: DictConfig) -> dict:
     s = cfg.steering
-    inputs = [s.labels_dir, s.split_dir]
-    check_output_dir(s.out_dir, "steering.out_dir", inputs)
     L.seed_everything(cfg.seed, workers=True)
     # The frames follow the path split's blocks of driving, with its guard (conf/split).
     parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror)
@@ -73,7 +81,7 @@ def train_steering(cfg: DictConfig) -> dict:
         scatter_plot(true, predicted, tmp / "scatter.png")
         return {**steering_metrics(true, predicted, s.lock_deg, s.steering_ratio), "by_true_magnitude": bins}
 
-    spec = RunSpec(stage="train_steering", out_dir=Path(s.out_dir), out_key="steering.out_dir", inputs=inputs,
+    spec = RunSpec(stage="train_steering", out_dir=Path(s.out_dir), out_key="steering.out_dir",
                    key=run_identity(cfg, "train_steering", settings, files), max_epochs=s.max_epochs, patience=s.patience,
                    write_more=write_predictions)  # fmt: skip
     tags = {"stage": "train_steering", "model": "pilotnet"}
@@ -81,8 +89,9 @@ def train_steering(cfg: DictConfig) -> dict:
     results = fit(cfg, task, data, spec, logger)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
     true, predicted = scored["true"], scored["predicted"]
-    write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n")
-    write_text_atomic(s.plots_path, "truth,prediction\n" + "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True)))
+    write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n", "train_steering")
+    pairs = "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True))
+    write_text_atomic(s.plots_path, "truth,prediction\n" + pairs, "train_steering")
     if logger is not None:
         logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
         for name in ("scatter.png", "error_by_magnitude.csv"):

@@ -30,6 +30,16 @@ class LabelledSequence:
         return sorted((self.folder / "label").glob("*.png"))
 
 
+def label_run_folders(labels_dir: str | Path) -> list[Path]:
+    """The label run and the recordings its summary.json names, for the output rule
+    (utils.outputs); just the run when its summary cannot be read (the stage reports that)."""
+    try:
+        entries = json.loads((Path(labels_dir) / "summary.json").read_text())["sequences"]
+        return [Path(labels_dir), *(Path(e["root"]) for e in entries)]
+    except (OSError, ValueError, KeyError, TypeError):
+        return [Path(labels_dir)]
+
+
 def read_label_run(labels_dir: Path) -> list[LabelledSequence]:
     """Every sequence of the label run in labels_dir, in the order of its summary.json."""
     summary_path = labels_dir / "summary.json"

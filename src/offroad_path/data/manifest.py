@@ -32,9 +32,26 @@ def write_manifest(path: Path, samples: list[Sample]) -> None:
         writer.writerows(asdict(s) for s in samples)
 
 
-def _sample(r: dict) -> Sample:
-    return Sample(r["sequence"], int(r["f0"]), r["mirrored"] == "True", r["image"], r["label"], r["disparity"], r["semantic"],
-                  float(r["fx"]), float(r["baseline_m"]))  # fmt: skip
+BOOLEANS = {"true": True, "false": False, "1": True, "0": False}  # any case: spreadsheets write TRUE
+
+
+def parse_boolean(value: str) -> bool:
+    if value.strip().lower() not in BOOLEANS:
+        raise ValueError(f"{value!r} is not true, false, 1 or 0")
+    return BOOLEANS[value.strip().lower()]
+
+
+def _sample(path: Path, number: int, r: dict) -> Sample:
+    """Row `number` of the manifest at `path` as a Sample; ValueError naming row and column."""
+    column = "sequence"
+    try:
+        values = {}
+        for column, parse in (("f0", int), ("mirrored", parse_boolean), ("fx", float), ("baseline_m", float)):
+            values[column] = parse(r[column])
+        return Sample(r["sequence"], values["f0"], values["mirrored"], r["image"], r["label"], r["disparity"], r["semantic"],
+                      values["fx"], values["baseline_m"])  # fmt: skip
+    except (KeyError, ValueError, TypeError, AttributeError) as e:
+        raise ValueError(f"{path}: row {number}, column {column}: {e}") from e
 
 
 def _rows(path: str | Path, columns: list[str], made_by: str) -> list[dict]:
@@ -46,6 +63,30 @@ def _rows(path: str | Path, columns: list[str], made_by: str) -> list[dict]:
         if reader.fieldnames != columns:
             raise ValueError(f"{path}: columns {reader.fieldnames} differ from the expected {columns}")
         return list(reader)
+
+
+def manifest_folders(path: str | Path) -> list[Path]:
+    """The recordings and label runs a manifest's rows point into, for the output rule
+    (utils.outputs). Empty when the manifest cannot be read: the stage reports that."""
+    folders: set[Path] = set()
+    try:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                for column in ("image", "semantic", "label", "disparity"):
+                    if row.get(column):
+                        folders.add(_container(Path(row[column])))
+    except (OSError, csv.Error, UnicodeDecodeError):
+        return []
+    return sorted(folders)
+
+
+def _container(file: Path) -> Path:
+    """The recording or label run a listed file belongs to, by the layouts the project writes; the
+    file's own folder for any other layout."""
+    folder = file.parent
+    if folder.name in ("label", "disparity"):  # <run>/<sequence>/label/NNNNNN.png
+        return folder.parent.parent
+    return folder.parent if folder.name in ("image_l", "image_2", "image_0", "semantic") else folder
 
 
 def data_root(paths: list[str | Path]) -> str:
@@ -73,10 +114,7 @@ def read_manifest(path: str | Path, check_files: bool = False) -> list[Sample]:
                 _check_inside(path, number, column, r[column], Path(root))
             if check_files and r[column] and not Path(r[column]).is_file():
                 raise FileNotFoundError(f"{path}: row {number}, {column} {r[column]} does not exist")
-    try:
-        return [_sample(r) for r in rows]
-    except (KeyError, ValueError) as e:
-        raise ValueError(f"{path}: a row is malformed ({e})") from e
+    return [_sample(path, number, r) for number, r in enumerate(rows, start=2)]
 
 
 # Confidence maps (written by `train`, `postprocess`): a split's samples with one .npy map each.
@@ -101,7 +139,4 @@ def read_predictions_manifest(path: str | Path, made_by: str = "train") -> list[
     rows = _rows(path, PREDICTION_COLUMNS, made_by)
     for number, r in enumerate(rows, start=2):
         _check_inside(path, number, "prediction", r["prediction"], path.parent)
-    try:
-        return [(_sample(r), r["prediction"]) for r in rows]
-    except (KeyError, ValueError) as e:
-        raise ValueError(f"{path}: a row is malformed ({e})") from e
+    return [(_sample(path, number, r), r["prediction"]) for number, r in enumerate(rows, start=2)]

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offroad_path.data.manifest import Sample
+from offroad_path.data.manifest import Sample, parse_boolean
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.tables import fmt
 
@@ -22,8 +22,8 @@ CONDITIONS: list[tuple[str, str, Callable[[dict], bool]]] = [
     ("all", "all test frames", lambda r: True),
     ("shadow", f"shadow on the path (>= {SHADOW_FRACTION:.0%} of it)", lambda r: float(r["shadow"]) >= SHADOW_FRACTION),
     ("no_shadow", "no shadow on the path", lambda r: float(r["shadow"]) < SHADOW_FRACTION),
-    ("water", "water on or near the path", lambda r: r["water"] == "True"),
-    ("fork", "a fork in view", lambda r: r["fork"] == "True"),
+    ("water", "water on or near the path", lambda r: parse_boolean(r["water"])),
+    ("fork", "a fork in view", lambda r: parse_boolean(r["fork"])),
     ("off_track", "off the track (mostly grass)", lambda r: r["surface"] == "grass"),
     ("paved", "paved road", lambda r: r["surface"] == "paved"),
     ("dirt", "dirt track", lambda r: r["surface"] == "dirt"),

@@ -14,12 +14,14 @@ from typing import Protocol
 import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.data.labels import label_run_folders
 from offroad_path.data.loading import load_labels, load_maps
-from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
+from offroad_path.data.manifest import Sample, manifest_folders, read_manifest, read_predictions_manifest
 from offroad_path.evaluation.figures import save_png
 from offroad_path.evaluation.metrics import counts, mean_path, precision_recall_curve
 from offroad_path.evaluation.tables import csv_text
-from offroad_path.utils.atomic import atomic_directory, check_output_dir, write_text_atomic
+from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger(__name__)
 POSTPROCESSING = ("no", "yes")
@@ -84,27 +86,26 @@ def report_metrics(sections: list[Section]) -> dict:
     return {key: value for section in sections for key, value in section.metrics().items()}
 
 
-def evaluate_inputs(e: DictConfig) -> list[str]:
-    return [e.runs_dir, e.postprocessed_dir, str(Path(e.train_manifest).parent), *([e.real_labels_dir] if e.real_labels_dir else [])]
-
-
-def check_outputs(e: DictConfig) -> None:
-    """Before any scoring: the output folders may be written (see utils.atomic)."""
-    for key in ("out_dir", "plots_dir"):
-        check_output_dir(e[key], f"evaluate.{key}", evaluate_inputs(e))
+def outputs(cfg: DictConfig) -> Outputs:
+    """The evaluate stage's outputs and every input: the runs, their post-processed maps, the label
+    runs, the split and the recordings behind it, PilotNet's predictions."""
+    e = cfg.evaluate
+    inputs = [e.runs_dir, e.postprocessed_dir, e.labels_dir, Path(e.train_manifest).parent, *manifest_folders(e.train_manifest),
+              e.steering_from_paths.pilotnet_predictions, *(label_run_folders(e.real_labels_dir) if e.real_labels_dir else [])]  # fmt: skip
+    folders = {"evaluate.out_dir": e.out_dir, "evaluate.plots_dir": e.plots_dir}
+    return Outputs("evaluate", folders=folders, files={"evaluate.metrics_path": e.metrics_path}, inputs=inputs)
 
 
 def write_report(e: DictConfig, test: TestSet, sections: list[Section], table: list, figures: dict[str, np.ndarray]) -> None:
     """evaluate.out_dir (results.md from the sections in order, results.csv of `table`, figures/),
     evaluate.plots_dir (each run's precision-recall curve), evaluate.metrics_path."""
-    inputs = evaluate_inputs(e)
-    with atomic_directory(e.out_dir, "evaluate", inputs, key="evaluate.out_dir") as tmp:
+    with atomic_directory(e.out_dir, "evaluate", key="evaluate.out_dir") as tmp:
         (tmp / "results.md").write_text("".join(section.markdown() for section in sections))
         (tmp / "results.csv").write_text(csv_text(table))
         for name, image in figures.items():
             save_png(tmp / "figures" / name, image)
-    with atomic_directory(e.plots_dir, "evaluate", inputs, key="evaluate.plots_dir") as tmp:
+    with atomic_directory(e.plots_dir, "evaluate", key="evaluate.plots_dir") as tmp:
         for run, curve in test.curves.items():
             lines = ["threshold,precision,recall"] + [f"{t:.4f},{p:.6f},{r:.6f}" for t, p, r in zip(*curve.values(), strict=True)]
             (tmp / f"{run}.csv").write_text("\n".join(lines) + "\n")
-    write_text_atomic(e.metrics_path, json.dumps(report_metrics(sections), indent=2) + "\n")
+    write_text_atomic(e.metrics_path, json.dumps(report_metrics(sections), indent=2) + "\n", "evaluate")

@@ -15,7 +15,7 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.data.labels import read_label_run
-from offroad_path.data.manifest import Sample
+from offroad_path.data.manifest import Sample, parse_boolean
 from offroad_path.steering.pure_pursuit import GroundCamera, steering_from_path
 
 log = logging.getLogger(__name__)
@@ -76,8 +76,13 @@ def pilotnet_predictions(path: Path, samples: list[Sample]) -> np.ndarray | None
     if not path.is_file():
         log.info("%s: no PilotNet predictions, no PilotNet row", path)
         return None
+    found = {}
     with open(path, newline="") as f:
-        found = {(r["sequence"], int(r["frame"]), r["mirrored"] == "True"): float(r["predicted"]) for r in csv.DictReader(f)}
+        for number, r in enumerate(csv.DictReader(f), start=2):
+            try:
+                found[r["sequence"], int(r["frame"]), parse_boolean(r["mirrored"])] = float(r["predicted"])
+            except (KeyError, ValueError, TypeError, AttributeError) as e:
+                raise ValueError(f"{path}: row {number} is malformed ({e})") from e
     missing = [s for s in samples if (s.sequence, s.f0, s.mirrored) not in found]
     if missing:
         raise ValueError(f"{path}: has no prediction for test frame {missing[0].sequence}/{missing[0].f0} (retrain on the same split)")

@@ -9,7 +9,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from offroad_path.errors import InputError
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
+from offroad_path.recordings.video import check_complete
 from offroad_path.sequence.reader import MAX_IMAGE_PIXELS, check_pixels, open_sequence, png_size
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
@@ -65,6 +67,10 @@ def _limit(n: int, max_frames: int | None) -> int:
 
 def _folder(path: Path, max_frames: int | None, max_pixels: int) -> FrameSource:
     files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    named: dict[str, Path] = {}
+    for file in files:  # outputs are named by stem: two images of one stem would overwrite each other's
+        if (other := named.setdefault(file.stem, file)) != file:
+            raise InputError(file, f"has the name of {other.name}; both would be written as {file.stem}.png: rename or remove one")
     files = files[: _limit(len(files), max_frames)]
     if not files:
         raise ValueError(f"{path}: holds no images ({', '.join(IMAGE_SUFFIXES)})")
@@ -116,6 +122,8 @@ def _video(path: Path, max_frames: int | None, max_pixels: int) -> FrameSource:
     fps = capture.get(cv2.CAP_PROP_FPS) or None
     count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) or 1  # a container's count; decoding may find fewer
 
+    declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+
     def frames() -> Iterator[Frame]:
         image, i = first, 0
         try:
@@ -123,6 +131,8 @@ def _video(path: Path, max_frames: int | None, max_pixels: int) -> FrameSource:
                 yield Frame(f"{i:06d}", cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
                 ok, image = capture.read()
                 image, i = (image if ok else None), i + 1
+            if image is None:  # the video ended, not max_frames
+                check_complete(path, i, declared)
         finally:
             capture.release()
 

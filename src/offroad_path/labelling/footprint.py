@@ -48,14 +48,26 @@ class VehicleFootprint:
 
 def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
     """The vehicle footprint from config, else from the sequence's meta.json."""
-    values = {}
+    values, source = {}, {}
     for key, meta_key in FOOTPRINT_META.items():
-        value = cfg.get(key)
+        value, source[key] = cfg.get(key), f"label.footprint.{key}"
         if value is None:
-            value = seq.meta.get(meta_key, 0.0 if key == "camera_pitch_deg" else None)
+            value, source[key] = seq.meta.get(meta_key, 0.0 if key == "camera_pitch_deg" else None), f"{seq.root / 'meta.json'} {meta_key}"
         if value is None:
             raise InputError(seq.root / "meta.json", f"gives no {meta_key}: set label.footprint.{key} for this recording")
-        values[key] = float(value)
+        try:
+            values[key] = float(value)
+        except (TypeError, ValueError):
+            values[key] = float("nan")
+        if not np.isfinite(values[key]):
+            raise InputError(source[key], f"{value!r} is not a number")
+    for key in ("width_m", "camera_height_m"):
+        if values[key] <= 0:
+            raise InputError(source[key], f"{values[key]:g} must be > 0 (metres)")
+    if values["front_m"] <= values["rear_m"]:
+        raise InputError(source["front_m"], f"{values['front_m']:g} must lie ahead of the vehicle's rear ({values['rear_m']:g} m)")
+    if abs(values["camera_pitch_deg"]) >= 90:
+        raise InputError(source["camera_pitch_deg"], f"{values['camera_pitch_deg']:g} must lie in (-90, 90) degrees")
     return VehicleFootprint(**values)
 
 

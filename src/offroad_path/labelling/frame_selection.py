@@ -41,9 +41,11 @@ def select_segments(
         if strategy == "midway":
             f0 = max((f0 + fn) // 2, f0 + 1)
         else:
-            # The k-th label starts k strides along the path from the first: no rounding drift.
-            ahead = np.flatnonzero(travelled >= travelled[start] + (len(segments) * stride_m) - 1e-9)
+            # The k-th label starts k strides along the path from the first: no rounding drift. A
+            # stride shorter than the frames' spacing skips the marks that would pick f0 again.
+            mark = max(len(segments), int((travelled[f0] - travelled[start]) // stride_m) + 1)
+            ahead = np.flatnonzero(travelled[f0 + 1 :] >= travelled[start] + mark * stride_m - 1e-9)
             if len(ahead) == 0:
                 break
-            f0 = int(ahead[0])
+            f0 = f0 + 1 + int(ahead[0])
     return segments

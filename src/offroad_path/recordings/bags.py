@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import contextlib
+import io
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from offroad_path.errors import InputError, missing_extra
 from offroad_path.recordings.calibration import StereoRig, camera_info_dict, rig_from_camera_infos
+from offroad_path.sequence.reader import MAX_IMAGE_PIXELS
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 INFO_TYPE = "sensor_msgs/msg/CameraInfo"
@@ -119,8 +121,26 @@ class Bag:
         return np.asarray(times), np.asarray(poses).reshape(-1, 4, 4)
 
 
-def decode_image(msg: Any, topic: str, source: Path) -> np.ndarray:
-    """A sensor_msgs Image or CompressedImage as uint8 BGR (H, W, 3) or grey (H, W)."""
+def compressed_size(msg: Any, topic: str, source: Path) -> tuple[int, int]:
+    """(width, height) a CompressedImage declares in its JPEG or PNG header, without decoding it."""
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(bytes(msg.data))) as image:
+            return image.size
+    except Image.DecompressionBombError as e:
+        raise InputError(source, f"{topic}: a compressed image at {stamp_s(msg):.6f} s declares too many pixels; not decoded") from e
+    except (OSError, SyntaxError, ValueError) as e:
+        raise InputError(source, f"{topic}: a compressed image ({msg.format!r}) at {stamp_s(msg):.6f} s cannot be decoded ({e})") from e
+
+
+def decode_image(msg: Any, topic: str, source: Path, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
+    """A sensor_msgs Image or CompressedImage as uint8 BGR (H, W, 3) or grey (H, W); refused from
+    its header when it declares more than max_pixels."""
+    width, height = compressed_size(msg, topic, source) if hasattr(msg, "format") else (msg.width, msg.height)
+    if width * height > max_pixels:
+        raise InputError(source, f"{topic}: a frame at {stamp_s(msg):.6f} s declares {width}x{height} pixels, more than the "
+                                 f"{max_pixels:,} allowed; it is not decoded")  # fmt: skip
     if hasattr(msg, "format"):  # CompressedImage: JPEG or PNG bytes
         image = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:

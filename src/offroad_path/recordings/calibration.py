@@ -22,6 +22,7 @@ from offroad_path.errors import InputError
 MAX_BASELINE_M = 10.0  # a larger |T| is a calibration in millimetres or board squares, not metres
 FISHEYE_MODELS = ("equidistant", "fisheye")
 PINHOLE_MODELS = ("plumb_bob", "radtan", "rational_polynomial", "pinhole", "")
+PINHOLE_COEFFICIENTS = (0, 4, 5, 8, 12, 14)  # the lengths of distortion vector OpenCV's pinhole model takes
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,19 @@ class CameraModel:
     D: np.ndarray  # (n,): OpenCV's k1 k2 p1 p2 [k3 ...], or k1..k4 for fisheye
     size: tuple[int, int] | None  # (width, height) the calibration was made at; None: the images'
     fisheye: bool = False
+
+    def check(self, name: str, source: Path) -> None:
+        """Refuse a camera no image can be rectified with: InputError naming `source`."""
+        if not (np.isfinite(self.K).all() and np.isfinite(self.D).all()):
+            raise InputError(source, f"{name}'s K or D holds a value that is not a finite number")
+        if not (self.K[0, 0] > 0 and self.K[1, 1] > 0):
+            raise InputError(source, f"{name}'s focal lengths fx = {self.K[0, 0]:g}, fy = {self.K[1, 1]:g} must be positive")
+        if self.size is not None and not (self.size[0] > 0 and self.size[1] > 0):
+            raise InputError(source, f"{name}'s image size {self.size[0]}x{self.size[1]} must be positive")
+        if self.fisheye and self.D.size != 4:
+            raise InputError(source, f"{name} is equidistant (fisheye) and needs 4 distortion coefficients, has {self.D.size}")
+        if not self.fisheye and self.D.size not in PINHOLE_COEFFICIENTS:
+            raise InputError(source, f"{name}'s distortion has {self.D.size} coefficients; OpenCV's model takes 0, 4, 5, 8, 12 or 14")
 
     def at_size(self, size: tuple[int, int], source: Path) -> CameraModel:
         """This camera for images of `size`: K scaled when the calibration was made at a uniform
@@ -57,7 +71,12 @@ class StereoRig:
     rostopics: tuple[str | None, str | None] = (None, None)  # Kalibr names the image topics
 
     def checked(self) -> StereoRig:
-        """Refuse rigs the label stage cannot use, naming the calibration."""
+        """Refuse rigs the label stage cannot use, naming the calibration: whatever it came from (a
+        calibration file, two ROS YAML files, a bag's CameraInfo), the same checks."""
+        for name, cam in (("left", self.left), ("right", self.right)):
+            cam.check(f"the {name} camera", self.source)
+        if not (np.isfinite(self.R).all() and np.isfinite(self.T).all()):
+            raise InputError(self.source, "R or T holds a value that is not a finite number")
         if not np.allclose(self.R.T @ self.R, np.eye(3), atol=1e-4) or np.linalg.det(self.R) < 0:
             raise InputError(self.source, "R is not a rotation matrix")
         baseline = float(np.linalg.norm(self.T))
@@ -75,13 +94,6 @@ class StereoRig:
             raise InputError(
                 self.source, f"T_x = {self.T[0]:g} > 0: the 'right' camera is left of the 'left' one; left and right are swapped"
             )
-        for name, cam in (("left", self.left), ("right", self.right)):
-            if cam.K[0, 0] <= 0 or cam.K[1, 1] <= 0:
-                raise InputError(self.source, f"the {name} camera's focal lengths must be positive")
-            if cam.fisheye and cam.D.size != 4:
-                raise InputError(
-                    self.source, f"the {name} camera is equidistant (fisheye) and needs 4 distortion coefficients, has {cam.D.size}"
-                )
         return self
 
 
@@ -131,8 +143,10 @@ def rig_from_camera_infos(left: dict, right: dict, source: Path) -> StereoRig:
         raise InputError(
             source, "the right CameraInfo's P has no baseline (P[0, 3] = 0): the cameras were calibrated one by one, not as a stereo pair"
         )
+    if not (np.isfinite(P_r).all() and P_r[0, 0] > 0 and P_r[1, 1] > 0):
+        raise InputError(source, "the right CameraInfo's P holds a focal length that is not a positive number")
     t = np.array([P_r[0, 3] / P_r[0, 0], P_r[1, 3] / P_r[1, 1], 0.0])
-    return StereoRig(cams[0], cams[1], R_r.T @ R_l, R_r.T @ t, source)
+    return StereoRig(cams[0], cams[1], R_r.T @ R_l, R_r.T @ t, source).checked()
 
 
 def camera_info_dict(msg: Any) -> dict:

@@ -60,6 +60,8 @@ class BagSource:
                 images = [t for t, (m, _) in self.bag.topics().items() if m in IMAGE_TYPES]
                 raise ValueError(f"ingest.topics.{side} is required: the image topics of {self.path} are {', '.join(images) or 'none'}")
             self.names[side] = topic
+        if self.names["left"] == self.names["right"]:
+            raise InputError(self.path, f"left and right images are both {self.names['left']}: a stereo pair needs two topics")
         if rig is None:
             infos = [c.topics[f"{side}_info"] or info_topic_for(self.names[side]) for side in ("left", "right")]
             rig = self.bag.rig(*infos)
@@ -74,7 +76,12 @@ class BagSource:
         messages = self.bag.stereo_messages(self.names["left"], self.names["right"])
         for t, left, right in pair_by_stamp(messages, self.c.sync_tolerance_s, self.stats, self.names, self.path):
             if keep(t):
-                yield t, decode_image(left, self.names["left"], self.path), decode_image(right, self.names["right"], self.path)
+                pair = decode_image(left, self.names["left"], self.path), decode_image(right, self.names["right"], self.path)
+                if _same_size(*pair, self.path) != self.input_size:  # a stream that changes size mid-way is not cropped silently
+                    size = f"{pair[0].shape[1]}x{pair[0].shape[0]}"
+                    first = f"{self.input_size[0]}x{self.input_size[1]}"
+                    raise InputError(self.path, f"the frames at {t:.6f} s are {size}, the stream's first {first}: one recording, one size")
+                yield t, *pair
         check_pairing(self.stats, self.c.max_unpaired_fraction, self.c.sync_tolerance_s, self.names, self.path)
 
     def camera_poses(self, times: np.ndarray) -> np.ndarray | None:
@@ -103,6 +110,8 @@ class BagSource:
 class VideoSource:
     def __init__(self, c: DictConfig):
         self.c = c
+        if Path(c.videos.left).resolve() == Path(c.videos.right).resolve():
+            raise InputError(c.videos.right, "is also ingest.videos.left: a stereo pair needs two videos")
         videos = [probe(Path(p)) for p in (c.videos.left, c.videos.right)]
         self.left, self.right = videos
         self.path = self.right.path

@@ -39,17 +39,30 @@ def probe(path: Path) -> VideoInfo:
         capture.release()
 
 
+def check_complete(path: Path, decoded: int, declared: int) -> None:
+    """A video that decodes to fewer frames than its container declares (1 % and a frame of slack
+    for containers that estimate the count) is truncated or damaged: InputError."""
+    if declared > 0 and decoded < 0.99 * declared - 1:
+        raise InputError(path, f"its container declares {declared} frames but only {decoded} decode: truncated or damaged")
+
+
 def frames(path: Path, start: int = 0) -> Iterator[np.ndarray]:
-    """Every decoded frame (BGR) from index `start` on."""
+    """Every decoded frame (BGR) from index `start` on; InputError at the end when the video
+    decodes to fewer frames than it declares."""
     capture = cv2.VideoCapture(str(path))
+    declared, decoded = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)), 0
     try:
         for _ in range(start):
             if not capture.grab():
+                check_complete(path, decoded, declared)
                 return
+            decoded += 1
         while True:
             ok, frame = capture.read()
             if not ok:
+                check_complete(path, decoded, declared)
                 return
+            decoded += 1
             yield frame
     finally:
         capture.release()

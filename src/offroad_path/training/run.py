@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 from offroad_path.data.datamodule import OffroadDataModule
 from offroad_path.data.dataset import transforms
 from offroad_path.data.loading import load_sample
-from offroad_path.data.manifest import prediction_name, write_predictions_manifest
+from offroad_path.data.manifest import manifest_folders, prediction_name, write_predictions_manifest
 from offroad_path.training.callbacks import LogSamples, SeedEachEpoch, StampConfig, StayStopped, configured_callbacks
 from offroad_path.training.checkpoints import (
     CONFIG_HASH,
@@ -39,7 +39,8 @@ from offroad_path.training.checkpoints import (
 )
 from offroad_path.training.pretrained import initialise
 from offroad_path.training.task import BaseTask, SegmentationTask
-from offroad_path.utils.atomic import MARKER, atomic_directory, check_output_dir, owned
+from offroad_path.utils.atomic import MARKER, atomic_directory, owned
+from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 from offroad_path.world.classes import CLASS_NAMES
 
@@ -75,7 +76,6 @@ class RunSpec:
     stage: str
     out_dir: Path
     out_key: str  # the config key of out_dir, for messages
-    inputs: list[str]  # folders and files out_dir must not overlap
     key: str  # run_identity(): a resume must match it
     max_epochs: int
     max_steps: int = -1  # -1: no cap
@@ -177,7 +177,7 @@ def fit(
     tested = trainer.test(task, data, verbose=False)[0]
     metrics = {f"best_{task.monitor.replace('/', '_')}": best_score,
                "epochs": trainer.current_epoch, "global_step": trainer.global_step, **{k: float(v) for k, v in tested.items()}}  # fmt: skip
-    with atomic_directory(spec.out_dir, spec.stage, spec.inputs, key=spec.out_key) as tmp:
+    with atomic_directory(spec.out_dir, spec.stage, key=spec.out_key) as tmp:
         extra = {"datamodule_hyper_parameters": dict(data.hparams)} if data.hparams else {}
         save_weights(tmp / "checkpoints" / "best.ckpt", task, **extra, **{CONFIG_HASH: key})
         if spec.write_more is not None:
@@ -187,6 +187,20 @@ def fit(
         logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
         logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
     return metrics
+
+
+def segmentation_outputs(stage: str) -> Callable[[DictConfig], Outputs]:
+    """The outputs rule of the pretrain and train stages: `<stage>.out_dir`, against the split, the
+    label runs and recordings its manifests point into, and the pretraining's checkpoint or weights."""
+
+    def outputs(cfg: DictConfig) -> Outputs:
+        split_dir = Path(cfg.data.split_dir)
+        inputs = [split_dir, *(f for part in ("train", "val", "test") for f in manifest_folders(split_dir / f"{part}.csv"))]
+        if "pretraining" in cfg:
+            inputs += [cfg.pretraining.checkpoint, cfg.pretraining.weights_path]
+        return Outputs(stage, folders={f"{stage}.out_dir": cfg[stage].out_dir}, inputs=inputs)
+
+    return outputs
 
 
 def fit_segmentation(
@@ -203,8 +217,6 @@ def fit_segmentation(
     own, m = cfg[stage], cfg.model
     out_dir = Path(own.out_dir)
     pretraining_name = pretraining.name if pretraining is not None else "none"
-    inputs = [cfg.data.split_dir] + ([pretraining.checkpoint] if pretraining is not None and pretraining.checkpoint else [])
-    check_output_dir(out_dir, f"{stage}.out_dir", inputs)
     L.seed_everything(cfg.seed, workers=True)
     data = OffroadDataModule.from_config(cfg.data, target, cfg.seed)
     data.setup()  # every listed file exists, before any training
@@ -221,7 +233,7 @@ def fit_segmentation(
         "data": {k: v for k, v in OmegaConf.to_container(cfg.data, resolve=True).items() if k not in LOADER_SETTINGS},
         "pretraining": OmegaConf.to_container(pretraining, resolve=True) if pretraining is not None else None,
     }  # fmt: skip
-    spec = RunSpec(stage=stage, out_dir=out_dir, out_key=f"{stage}.out_dir", inputs=inputs, key=run_identity(cfg, stage, settings, files),
+    spec = RunSpec(stage=stage, out_dir=out_dir, out_key=f"{stage}.out_dir", key=run_identity(cfg, stage, settings, files),
                    max_epochs=own.get("max_epochs") or cfg.trainer.max_epochs, max_steps=own.max_steps,
                    validate=bool(data.samples["val"]), extra_callbacks=(LogSamples(own.sample_images),), write_more=write_more)  # fmt: skip
     tags = {"stage": stage, "model": m.name, "pretraining": pretraining_name}

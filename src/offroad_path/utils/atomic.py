@@ -10,7 +10,7 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 MARKER = ".offroad-path-output"  # inside every folder the project wrote; its text names the stage
@@ -27,24 +27,29 @@ def remove_unfinished() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _related(a: Path, b: Path) -> bool:
-    return a == b or a.is_relative_to(b) or b.is_relative_to(a)
+def marker_stage(marker: Path) -> str | None:
+    """The stage a marker (or sidecar marker) names; None when there is none."""
+    try:
+        words = marker.read_text().split()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return words[0] if words and marker.is_file() else None
 
 
-def check_output_dir(target: str | Path, key: str, inputs: Iterable[str | Path] = ()) -> None:
-    """Refuse, before any work, an output folder that is, holds or lies inside an input, or that
-    exists with content but was not made by this project. `key` names the setting, for the message."""
+def sidecar(path: Path) -> Path:
+    """The marker beside a file output, naming the stage that wrote it."""
+    return path.parent / f".{path.name}{MARKER}"
+
+
+def check_output_dir(target: str | Path, key: str, stage: str) -> None:
+    """Refuse a folder output that exists and is not the output of `stage` (a folder with content and
+    no marker naming it). Checked again when the output is replaced: nothing else appeared meanwhile."""
     target = Path(target)
-    resolved = target.resolve()
-    for source in inputs:
-        if source is not None and _related(resolved, Path(source).resolve()):
-            raise UnsafeOutputError(f"{key}={target}: overlaps the input {source}; writing there would delete it. Choose another {key}")
     if target.is_symlink() or (target.exists() and not target.is_dir()):
         raise UnsafeOutputError(f"{key}={target}: exists and is not a folder; it is left as it is. Choose another {key}")
-    if target.is_dir() and not (target / MARKER).is_file() and any(target.iterdir()):
+    if target.is_dir() and any(target.iterdir()) and marker_stage(target / MARKER) != stage:
         raise UnsafeOutputError(
-            f"{key}={target}: a folder this project did not write (no {MARKER} inside) is not replaced. "
-            f"Choose another {key}, or empty or remove it yourself"
+            f"{key}={target}: not an output of the {stage} stage (see its {MARKER}); not replaced. Choose another {key}"
         )
 
 
@@ -77,14 +82,14 @@ def remove_stale_siblings(target: Path) -> list[Path]:
 
 
 @contextlib.contextmanager
-def atomic_directory(target: str | Path, stage: str, inputs: Iterable[str | Path] = (), key: str | None = None) -> Iterator[Path]:
+def atomic_directory(target: str | Path, stage: str, key: str | None = None) -> Iterator[Path]:
     """Yield an empty temporary directory that replaces `target` completely on success.
 
-    `stage` is written into the marker; `inputs` are folders target must not overlap; `key` is the
-    config key of target, for messages (default: the stage's name).
+    `stage` is written into the marker; `key` is the config key of target, for messages (default:
+    the stage's name). The stage runner has checked target against the stage's inputs (utils.outputs).
     """
     target = Path(target)
-    check_output_dir(target, key or stage, inputs)
+    check_output_dir(target, key or stage, stage)
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_siblings(target)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-{os.getpid()}-", dir=target.parent))
@@ -100,17 +105,21 @@ def atomic_directory(target: str | Path, stage: str, inputs: Iterable[str | Path
         _UNFINISHED.discard(tmp)
     old = target.parent / f".{target.name}.old-{os.getpid()}"
     if target.exists():
-        check_output_dir(target, key or stage)  # nothing of the user's appeared there meanwhile
+        check_output_dir(target, key or stage, stage)  # nothing of the user's appeared there meanwhile
         os.replace(target, old)
     os.replace(tmp, target)
     shutil.rmtree(old, ignore_errors=True)
 
 
-def write_text_atomic(path: str | Path, text: str) -> None:
+def write_text_atomic(path: str | Path, text: str, stage: str | None = None) -> None:
+    """Replace the file at `path` with `text` in one rename; a stage's output (`stage` given) gets
+    a sidecar marker naming the stage, which lets the next run of that stage replace it."""
     path = Path(path)
     if path.is_dir():
         raise UnsafeOutputError(f"{path}: is a folder; a file was expected here and the folder is left as it is")
     path.parent.mkdir(parents=True, exist_ok=True)
+    if stage is not None:
+        write_text_atomic(sidecar(path), f"{stage}\n")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as f:

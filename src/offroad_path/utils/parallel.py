@@ -1,7 +1,11 @@
 """One single-threaded worker process per core, for stages that work sequence by sequence.
 
-A worker's error reaches the parent whole (type and message; a traceback for a bug), the pool is
-shut down at once, and workers die with their parent, so a failure or a stop leaves no process behind.
+A worker's error reaches the parent whole (type and message; a traceback for a bug); a worker that
+dies (a signal, the out-of-memory killer) ends the map with an error naming its job; the others are
+stopped at once, and workers die with their parent, so a failure or a stop leaves no process behind.
+
+Each worker has its own pipe and the parent hands out one job at a time, so it always knows which
+job a dead worker had (multiprocessing.Pool replaces a dead worker and waits for its job forever).
 """
 
 from __future__ import annotations
@@ -13,10 +17,13 @@ import signal
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from offroad_path.errors import InputError
+
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-_ACTIVE_POOLS: list[Any] = []  # for stop_workers, called on SIGTERM
+_ACTIVE: list[Any] = []  # worker processes of this process, for stop_workers (on SIGTERM)
 
 
 class WorkerError(RuntimeError):
@@ -30,8 +37,9 @@ class _Failure:
 
 
 def _die_with_parent() -> None:
-    """Pool initialiser: the kernel kills this worker when the parent dies, even by SIGKILL (Linux)."""
+    """In a worker: the kernel kills it when the parent dies, even by SIGKILL (Linux)."""
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which stops the workers
     try:
         import ctypes
 
@@ -40,8 +48,7 @@ def _die_with_parent() -> None:
         pass
 
 
-def _call(fn_job: tuple[Callable[[Any], Any], Any]) -> Any:
-    fn, job = fn_job
+def _call(fn: Callable[[Any], Any], job: Any) -> Any:
     try:
         return fn(job)
     except Exception as e:
@@ -52,49 +59,131 @@ def _call(fn_job: tuple[Callable[[Any], Any], Any]) -> Any:
             return _Failure(None, "".join(traceback.format_exception(e)))
 
 
+def _serve(conn: Connection) -> None:
+    """A worker's loop: (fn, job) in, its result out, until None or the parent is gone."""
+    _die_with_parent()
+    while True:
+        try:
+            message = conn.recv()
+        except EOFError:
+            return
+        if message is None:
+            return
+        conn.send(_call(*message))
+
+
 def _raise(failure: _Failure) -> None:
     if failure.error is not None:
         raise failure.error
     raise WorkerError(f"a worker process failed:\n{failure.text}")
 
 
+def _death(process: Any) -> str:
+    code = process.exitcode
+    if code is not None and code < 0:
+        name = signal.Signals(-code).name
+        why = " (the kernel's out-of-memory killer sends it)" if name == "SIGKILL" else ""
+        return f"killed by {name}{why}"
+    return f"exited with status {code}"
+
+
 def stop_workers() -> None:
-    """Terminate every pool of this process (no replacement workers start) and its processes."""
-    for pool in list(_ACTIVE_POOLS):
-        pool.terminate()
-    for child in mp.active_children():
-        child.terminate()
-        child.join(timeout=5)
+    """Terminate every worker process of this process, then kill those still alive after 5 s."""
+    for process in list(_ACTIVE):
+        if process.is_alive():
+            process.terminate()
+    for process in list(_ACTIVE):
+        process.join(timeout=5)
+        if process.is_alive():
+            process.kill()
+            process.join()
 
 
-def map_processes(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 0) -> list[Any]:
-    """[fn(job) for job in jobs], on `workers` processes (0: one per core), results in job order.
-
-    The thread variables must be set before a worker imports numpy, hence spawn: BLAS threads in
-    every worker would fight over the cores (here, that cost 40 % of the rendering throughput).
-    `fn` should call cv2.setNumThreads(1) for the same reason. The first failing job stops the rest.
-    """
-    workers = min(workers or os.cpu_count() or 1, len(jobs))
-    if workers <= 1:
-        return [fn(job) for job in jobs]
+def _start(count: int) -> list[tuple[Any, Connection]]:
+    """`count` spawned workers, each with its end of a pipe. The thread variables must be set before
+    a worker imports numpy, hence spawn: BLAS threads in every worker would fight over the cores
+    (here, that cost 40 % of the rendering throughput)."""
+    context = mp.get_context("spawn")
     saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
     os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
-    pool = mp.get_context("spawn").Pool(workers, initializer=_die_with_parent)
-    _ACTIVE_POOLS.append(pool)
     try:
-        results = []
-        for result in pool.imap(_call, [(fn, job) for job in jobs], chunksize=1):
-            if isinstance(result, _Failure):
-                _raise(result)
-            results.append(result)
-        pool.close()
-        return results
+        started = []
+        for _ in range(count):
+            mine, theirs = context.Pipe()
+            process = context.Process(target=_serve, args=(theirs,), daemon=True)
+            process.start()
+            theirs.close()
+            _ACTIVE.append(process)
+            started.append((process, mine))
+        return started
     finally:
-        pool.terminate()
-        pool.join()
-        _ACTIVE_POOLS.remove(pool)
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+def _stop(pool: list[tuple[Any, Connection]]) -> None:
+    for process, _ in pool:
+        if process.is_alive():
+            process.terminate()
+    for process, conn in pool:
+        process.join(timeout=5)
+        if process.is_alive():
+            process.kill()
+            process.join()
+        conn.close()
+        _ACTIVE.remove(process)
+
+
+def _receive(process: Any, conn: Connection, ready: set, job: str) -> Any:
+    """The result a worker sent, or the error of its death (InputError naming its job)."""
+    if conn in ready:
+        try:
+            result = conn.recv()
+        except EOFError:  # died while sending
+            pass
+        else:
+            if isinstance(result, _Failure):
+                _raise(result)
+            return result
+    process.join()
+    raise InputError(job, f"its worker process was {_death(process)}; nothing was written")
+
+
+def map_processes(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 0, names: Sequence[str] | None = None) -> list[Any]:
+    """[fn(job) for job in jobs], on `workers` processes (0: one per core), results in job order.
+
+    `fn` should call cv2.setNumThreads(1) (one process per core). The first failing job stops the
+    rest; a worker that dies raises InputError naming its job (`names`, default: its number).
+    """
+    workers = min(workers or os.cpu_count() or 1, len(jobs))
+    if workers <= 1:
+        return [fn(job) for job in jobs]
+    names = names or [f"job {i}" for i in range(len(jobs))]
+    results: dict[int, Any] = {}
+    pending = iter(range(len(jobs)))
+    doing: dict[int, int] = {}  # worker -> its job
+    pool = _start(workers)
+
+    def hand_out(w: int) -> None:
+        i = next(pending, None)
+        pool[w][1].send(None if i is None else (fn, jobs[i]))
+        if i is None:
+            del doing[w]
+        else:
+            doing[w] = i
+
+    try:
+        for w in range(workers):
+            doing[w] = -1
+            hand_out(w)
+        while doing:
+            ready = set(wait([pool[w][1] for w in doing] + [pool[w][0].sentinel for w in doing]))
+            for w in [w for w in doing if pool[w][1] in ready or pool[w][0].sentinel in ready]:
+                results[doing[w]] = _receive(*pool[w], ready, names[doing[w]])
+                hand_out(w)
+        return [results[i] for i in range(len(jobs))]
+    finally:
+        _stop(pool)

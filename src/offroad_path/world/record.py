@@ -115,7 +115,7 @@ def record_sequences(cfg: WorldConfig, count: int, master_seed: int, out_dir: Pa
     """Render `count` sequences into out_dir/seq_NNN in parallel, one process per worker."""
     jobs = [(cfg, sequence_seed(master_seed, i), str(out_dir / f"seq_{i:03d}")) for i in range(count)]
     start = time.perf_counter()
-    summaries = map_processes(_record_job, jobs, workers)
+    summaries = map_processes(_record_job, jobs, workers, [f"sequence seq_{i:03d}" for i in range(count)])
     elapsed = time.perf_counter() - start
     frames = sum(s["frames"] for s in summaries)
     log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", count, frames, elapsed, frames / elapsed)
