@@ -201,8 +201,14 @@ def test_cli_exits_non_zero_with_one_line(drive, tmp_path):
     recordings = tmp_path / "recordings"
     shutil.copytree(drive, recordings)
     (recordings / "drive" / "image_r" / "000005.png").unlink()
-    cli = [sys.executable, "-m", "offroad_path.label", f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'labels'}",
-           f"label.metrics_path={tmp_path / 'm.json'}"]
+    cli = [
+        sys.executable,
+        "-m",
+        "offroad_path.label",
+        f"label.in_dir={recordings}",
+        f"label.out_dir={tmp_path / 'labels'}",
+        f"label.metrics_path={tmp_path / 'm.json'}",
+    ]
     run = subprocess.run([*cli, "mlflow.enabled=false"], capture_output=True, text=True)
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1].startswith(f"error: {recordings / 'drive' / 'image_r'}: lacks 1 right image")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -99,3 +101,29 @@ def test_a_stopped_stage_leaves_no_temporary_output(tmp_path):
     stage.send_signal(signal.SIGTERM)
     assert stage.wait(timeout=60) == 128 + signal.SIGTERM
     assert not any(tmp_path.iterdir())
+
+
+def without_vector_kernels() -> dict[str, str]:
+    """An environment in which OpenCV and NumPy use none of their CPU-specific vector kernels (the
+    dispatched ones: SSE4 and up for OpenCV, X86_V3 and up for NumPy)."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+    dispatched = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
+    env = {"OPENCV_CPU_DISABLE": "SSE4.1,SSE4.2,POPCNT,AVX,FP16,AVX2,FMA3"}
+    return env | ({"NPY_DISABLE_CPU_FEATURES": " ".join(dispatched)} if dispatched else {})
+
+
+@pytest.mark.slow(seconds=30)
+def test_the_world_renders_the_same_bytes_with_and_without_vector_kernels(tmp_path):
+    def render(name: str, env: dict[str, str]) -> dict[str, str]:
+        out = tmp_path / name
+        cli = [sys.executable, "-m", "offroad_path.synthesize", *TINY, f"synthesize.out_dir={out}", f"hydra.run.dir={tmp_path / 'hydra'}"]
+        run = subprocess.run(cli, env={**os.environ, **env}, capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr[-2000:]
+        return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file()}
+
+    scalar = without_vector_kernels()
+    probe = "import cv2; print(cv2.getCPUFeaturesLine())"
+    line = subprocess.run([sys.executable, "-c", probe], env={**os.environ, **scalar}, capture_output=True, text=True).stdout
+    assert "*AVX2?" in line or "*AVX2" not in line, line  # OpenCV's AVX2 kernels are off (or were never there)
+    assert render("vector", {}) == render("scalar", scalar)

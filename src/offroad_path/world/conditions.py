@@ -19,8 +19,8 @@ import numpy as np
 
 from offroad_path.config import WorldConfig
 from offroad_path.world.classes import DIRT, GRASS, PAVED, WATER
+from offroad_path.world.kernels import sample_bilinear
 from offroad_path.world.scene import World
-from offroad_path.world.terrain import sample_bilinear
 from offroad_path.world.trajectory import ARC_STEP_M
 
 COLUMNS = ("frame", "shadow", "water", "fork", "surface", "bend_radius_m")

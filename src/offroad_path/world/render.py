@@ -15,9 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from offroad_path.world.classes import SKY, WATER
+from offroad_path.world.kernels import sample_bilinear
 from offroad_path.world.objects import intersect
 from offroad_path.world.scene import World
-from offroad_path.world.terrain import Terrain, sample_bilinear
+from offroad_path.world.terrain import Terrain
 
 NEAR_M = 0.3
 RELAX = 0.02  # march step at least 2 % of the distance: thinner distant bumps than that are skipped

@@ -13,6 +13,7 @@ import numpy as np
 
 from offroad_path.config import WorldConfig
 from offroad_path.world.classes import BASE_COLORS, DIRT, GRASS, PAVED, WATER
+from offroad_path.world.kernels import gaussian_blur, resize_cubic
 from offroad_path.world.objects import Objects
 from offroad_path.world.placement import Placement, place_objects
 from offroad_path.world.terrain import Grid, Terrain, fourier_hills, polyline_mask, value_noise
@@ -90,8 +91,8 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
     heights += 0.3 * cfg.bump_height_m * value_noise(rng, hgrid.shape, 0.6 / HEIGHT_STEP_M)
     # A track bed is smoother than the land around it.
     bed = polyline_mask(hgrid, track.xz, cfg.track_width_m + 2.0)
-    bed = cv2.GaussianBlur(bed.astype(np.float32) / 255.0, (0, 0), 1.0 / HEIGHT_STEP_M)
-    smooth = cv2.GaussianBlur(heights.astype(np.float32), (0, 0), 2.0 / HEIGHT_STEP_M).astype(np.float64)
+    bed = gaussian_blur(bed.astype(np.float32) / 255.0, 1.0 / HEIGHT_STEP_M)
+    smooth = gaussian_blur(heights.astype(np.float32), 2.0 / HEIGHT_STEP_M).astype(np.float64)
     heights = heights + 0.8 * bed * (smooth - heights)
 
     materials = np.full(mgrid.shape, GRASS, np.uint8)
@@ -165,7 +166,7 @@ def _paint_ragged(rng: np.random.Generator, materials: np.ndarray, grid: Grid, b
     if len(ys) == 0:
         return
     r0, r1, c0, c1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    window = cv2.GaussianBlur(mask[r0:r1, c0:c1].astype(np.float32) / 255.0, (0, 0), 3.0)
+    window = gaussian_blur(mask[r0:r1, c0:c1].astype(np.float32) / 255.0, 3.0)
     window += 0.3 * value_noise(rng, window.shape, 0.35 / grid.step)
     materials[r0:r1, c0:c1][window > 0.5] = cls
 
@@ -211,7 +212,7 @@ def _flatten_puddles(heights: np.ndarray, grid: Grid, puddles: list) -> np.ndarr
         if not inside.any():
             continue
         level = heights[inside].mean() - 0.04
-        weight = cv2.GaussianBlur(inside.astype(np.float32), (0, 0), 0.4 / grid.step)
+        weight = gaussian_blur(inside.astype(np.float32), 0.4 / grid.step)
         weight = np.maximum(weight, inside)
         heights = heights + weight * (level - heights)
     return heights
@@ -243,13 +244,13 @@ def _textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
             n = size // int(cell)
             coarse = rng.uniform(-1, 1, (n, n)).astype(np.float32)
             tiled = np.tile(coarse, (3, 3))  # resize a 3x3 tiling and keep the centre: seamless wrap
-            big = cv2.resize(tiled, (3 * size, 3 * size), interpolation=cv2.INTER_CUBIC)
+            big = resize_cubic(tiled, (3 * size, 3 * size))
             out += big[size : 2 * size, size : 2 * size] * 0.85**i
         return out / out.std()  # unit standard deviation
 
     def wrapped_blur(tex: np.ndarray, sigma: float) -> np.ndarray:
         size = tex.shape[0]
-        return cv2.GaussianBlur(np.tile(tex, (3, 3)), (0, 0), sigma)[size : 2 * size, size : 2 * size]
+        return gaussian_blur(np.tile(tex, (3, 3)), sigma)[size : 2 * size, size : 2 * size]
 
     def pebbles(count: int, radii: tuple[int, int]) -> np.ndarray:
         """Sharp-edged stones and tufts: the corners a feature tracker locks on to."""
@@ -311,5 +312,5 @@ def _shadow_map(grid: Grid, terrain: Terrain, objects: Objects, sun: np.ndarray)
             corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)]) * half
             pts = centre + corners @ rot.T
         cast(pts)
-    soft = cv2.GaussianBlur(shadow, (0, 0), 0.08 / grid.step)
+    soft = gaussian_blur(shadow, 0.08 / grid.step)
     return soft.astype(np.float32) / 255.0

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from offroad_path.world.kernels import resize_cubic, sample_bilinear
+
 
 @dataclass
 class Grid:
@@ -25,7 +27,7 @@ class Grid:
     shape: tuple[int, int]  # (rows along z, cols along x)
 
     def coords(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Fractional (col, row) of world points, as float32 maps for cv2.remap."""
+        """Fractional (col, row) of world points, as float32 maps for sample_bilinear."""
         return ((x - self.x0) / self.step).astype(np.float32), ((z - self.z0) / self.step).astype(np.float32)
 
     def nearest(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -130,26 +132,8 @@ def value_noise(rng: np.random.Generator, shape: tuple[int, int], cell: float) -
     """Smooth noise in [-1, 1]: random values every `cell` pixels, bicubically upsampled."""
     coarse = rng.uniform(-1, 1, (int(shape[0] / cell) + 4, int(shape[1] / cell) + 4)).astype(np.float32)
     size = (int(coarse.shape[1] * cell), int(coarse.shape[0] * cell))
-    fine = cv2.resize(coarse, size, interpolation=cv2.INTER_CUBIC)
+    fine = resize_cubic(coarse, size)
     return np.clip(fine[: shape[0], : shape[1]], -1, 1)
-
-
-def sample_bilinear(image: np.ndarray, mx: np.ndarray, my: np.ndarray, wrap: bool = False) -> np.ndarray:
-    """cv2.remap at scattered points: values (N,) or (N, channels) at fractional pixel (mx, my).
-
-    remap wants 2D maps shorter than 32767 on each side, so the points are laid out in rows.
-    """
-    n = len(mx)
-    if n == 0:
-        return np.zeros((0, *image.shape[2:]), image.dtype)
-    cols = 512
-    rows = -(-n // cols)
-    pad = rows * cols - n
-    mx = np.pad(np.asarray(mx, np.float32), (0, pad)).reshape(rows, cols)
-    my = np.pad(np.asarray(my, np.float32), (0, pad)).reshape(rows, cols)
-    mode = cv2.BORDER_WRAP if wrap else cv2.BORDER_REPLICATE
-    out = cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=mode)
-    return out.reshape(rows * cols, -1)[:n].squeeze(-1) if out.ndim == 2 else out.reshape(rows * cols, -1)[:n]
 
 
 def polyline_mask(grid: Grid, xz: np.ndarray, width_m: float) -> np.ndarray:
