@@ -130,7 +130,7 @@ class RosMessages:
 
 def write_bag(path: Path, kind: str, frames: list, rig: RawRig, *, compressed: tuple[bool, bool] = (False, False),
               poses: np.ndarray | None = None, fps: float = 5.0, infos: bool = True, right_delay_s: float = 0.0,
-              right_frames: slice = slice(None)) -> Path:  # fmt: skip
+              right_frames: slice = slice(None), camera_infos: list[dict] | None = None) -> Path:  # fmt: skip
     """A ROS 1 bag (kind "ros1") or ROS 2 bag ("sqlite3", "mcap") of the raw frames, written with
     rosbags: /stereo/{left,right}/image_raw (or .../compressed, PNG), their camera_info, /odom."""
     from rosbags.rosbag1 import Writer as Writer1
@@ -138,7 +138,7 @@ def write_bag(path: Path, kind: str, frames: list, rig: RawRig, *, compressed: t
     from rosbags.rosbag2 import Writer as Writer2
 
     ros = RosMessages(kind == "ros1")
-    camera_infos = rig.camera_infos()
+    camera_infos = camera_infos or rig.camera_infos()
     right_indices = set(range(len(frames))[right_frames])
     messages = []  # (receive time, topic, message): a recorder stores them as they arrive
     for i, (left, right) in enumerate(frames):

@@ -25,6 +25,12 @@ def test_stride_along_the_path():
     assert select_segments(line(30, 1.0), 20.0, "stride", stride_m=2.5) == [(0, 21), (3, 24), (5, 26), (8, 29)]
 
 
+def test_a_stride_shorter_than_the_frames_spacing_labels_each_frame_once():
+    # 1 m between frames, a mark every 5 cm: each frame starts one label, none twice (the marks
+    # between two frames would otherwise all pick the next frame and overwrite its label).
+    assert select_segments(line(30, 1.0), 20.0, "stride", stride_m=0.05) == [(f0, f0 + 21) for f0 in range(9)]
+
+
 def test_distance_is_straight_line_from_f0():
     # A U-turn never gets 20 m from its start, so it gets no label however long it drives.
     angle = np.linspace(0, np.pi, 200)

@@ -233,3 +233,22 @@ def test_the_cli_runs_the_same_checks(tmp_path):
                          capture_output=True, text=True, cwd=ROOT)  # fmt: skip
     assert run.returncode == 2 and run.stderr.strip() == "error: label.stride_m=0.0: must be a number >= 0.05"
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    "overrides,named",
+    [
+        (["label.strategy=stride", "label.stride_m=1e-9"], ["label.stride_m=1e-09", ">= 0.05"]),
+        (["label.strategy=stride", "label.stride_m=25"], ["label.stride_m=25", "at most label.distance_m (20)"]),
+        (["label.footprint.width_m=-1.9"], ["label.footprint.width_m", "-1.9 must be > 0"]),
+        (["label.footprint.front_m=-3"], ["label.footprint.front_m", "must lie ahead of the vehicle's rear"]),
+    ],
+    ids=["stride too short", "stride beyond D", "negative width", "front behind rear"],
+)
+def test_label_values_out_of_their_real_bounds(compose_config, recordings, tmp_path, capsys, overrides, named):
+    refused(label, label_cfg(compose_config, recordings, tmp_path, *overrides), capsys, tmp_path, *named)
+
+
+def test_a_dense_stride_writes_every_label_it_counts(compose_config, recordings, tmp_path):
+    metrics = label(label_cfg(compose_config, recordings, tmp_path, "label.strategy=stride", "label.stride_m=0.05"))
+    assert metrics["labels"] == len(list((tmp_path / "labels").glob("*/label/*.png"))) > 0

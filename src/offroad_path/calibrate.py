@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from offroad_path.errors import InputError, clear_errors
+from offroad_path.errors import CommandParser, InputError, clear_errors, positive_number
 from offroad_path.recordings.boards import Board, calibrate_stereo
 from offroad_path.recordings.calibration import write_opencv
 
@@ -46,18 +46,22 @@ def board_size(text: str) -> tuple[int, int]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m offroad_path.calibrate", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="python -m offroad_path.calibrate", description=__doc__.splitlines()[0])
     parser.add_argument("left", type=Path)
     parser.add_argument("right", type=Path)
     parser.add_argument("--board", type=board_size, required=True, help="squares across x down, e.g. 10x7")
-    parser.add_argument("--square-m", type=float, required=True, help="side of one square in metres")
-    parser.add_argument("--marker-m", type=float, default=None, help="ChArUco: side of a marker in metres (no value: a chessboard)")
+    parser.add_argument("--square-m", type=positive_number, required=True, help="side of one square in metres")
+    parser.add_argument(
+        "--marker-m", type=positive_number, default=None, help="ChArUco: side of a marker in metres (no value: a chessboard)"
+    )
     parser.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco: OpenCV's ArUco dictionary")
     parser.add_argument("--out", type=Path, required=True, help="the OpenCV YAML written")
     args = parser.parse_args(argv)
     with clear_errors():
         if args.out.exists():
             raise InputError(args.out, "exists; it is not replaced (choose another --out or remove it)")
+        if not args.out.parent.is_dir():
+            raise InputError(args.out.parent, "is not a folder: --out must name a file in an existing folder")
         left, right = image_pairs(args.left, args.right)
         board = Board(*args.board, args.square_m, args.marker_m, args.dictionary)
         result = calibrate_stereo(left, right, board, args.out)

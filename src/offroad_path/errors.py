@@ -3,6 +3,7 @@ key, exit status 2, no traceback. The lowest layer: it imports nothing of the pr
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import sys
 from collections.abc import Iterator
@@ -53,3 +54,23 @@ def one_line(error: BaseException) -> str:
     if cause is not None and str(cause).strip() and str(cause).strip() not in text:
         text += f" ({str(cause).strip().splitlines()[0]})"
     return text
+
+
+class CommandParser(argparse.ArgumentParser):
+    """argparse for the project's small commands: a bad argument is one `error:` line and exit 2,
+    as bad input is everywhere else (argparse prints its usage first)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        print(f"error: {self.prog}: {message} (--help lists the arguments)", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
+def positive_number(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value > 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number > 0")
+    return value

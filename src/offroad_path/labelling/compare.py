@@ -6,13 +6,12 @@ the mean and minimum IoU of the path masks, and the frames only one of them labe
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from offroad_path.errors import clear_errors
+from offroad_path.errors import CommandParser, clear_errors
 
 
 def read_mask(path: Path) -> np.ndarray:
@@ -42,7 +41,7 @@ def compare(a: Path, b: Path) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m offroad_path.labelling.compare", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="python -m offroad_path.labelling.compare", description=__doc__.splitlines()[0])
     parser.add_argument("a", type=Path)
     parser.add_argument("b", type=Path)
     args = parser.parse_args(argv)

@@ -8,18 +8,17 @@ SEQUENCE is a recording, LABELS the label stage's folder for it (with label/NNNN
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import cv2
 
-from offroad_path.errors import clear_errors
+from offroad_path.errors import CommandParser, clear_errors
 from offroad_path.sequence.reader import open_sequence
 from offroad_path.viz import overlay
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m offroad_path.labelling.overlay", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="python -m offroad_path.labelling.overlay", description=__doc__.splitlines()[0])
     parser.add_argument("sequence", type=Path)
     parser.add_argument("labels", type=Path)
     parser.add_argument("out", type=Path)

@@ -129,7 +129,7 @@ def compressed_size(msg: Any, topic: str, source: Path) -> tuple[int, int]:
         with Image.open(io.BytesIO(bytes(msg.data))) as image:
             return image.size
     except Image.DecompressionBombError as e:
-        raise InputError(source, f"{topic}: a compressed image at {stamp_s(msg):.6f} s declares too many pixels; not decoded") from e
+        raise InputError(source, f"{topic}: a compressed image at {stamp_s(msg):.6f} s declares too many pixels ({e}); not decoded") from e
     except (OSError, SyntaxError, ValueError) as e:
         raise InputError(source, f"{topic}: a compressed image ({msg.format!r}) at {stamp_s(msg):.6f} s cannot be decoded ({e})") from e
 

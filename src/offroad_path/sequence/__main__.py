@@ -6,9 +6,7 @@ frame, and prints one line per sequence. Bad input: one line naming the file, ex
 
 from __future__ import annotations
 
-import argparse
-
-from offroad_path.errors import clear_errors
+from offroad_path.errors import CommandParser, clear_errors
 from offroad_path.geometry.path import path_length
 from offroad_path.sequence.reader import find_sequences, open_sequence
 
@@ -38,7 +36,7 @@ def describe(path: str) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m offroad_path.sequence", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="python -m offroad_path.sequence", description=__doc__.splitlines()[0])
     parser.add_argument("paths", nargs="+", help="a sequence folder, or a folder of sequences")
     args = parser.parse_args(argv)
     with clear_errors():

@@ -5,13 +5,12 @@ python -m offroad_path.world.preview data/synthetic docs/images/world_samples.pn
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from offroad_path.errors import clear_errors
+from offroad_path.errors import CommandParser, clear_errors
 from offroad_path.sequence.reader import Sequence, find_sequences, open_sequence
 from offroad_path.viz import colour_depth, colour_semantic
 
@@ -32,7 +31,7 @@ def contact_sheet(root: str | Path, rows: int = 3) -> np.ndarray:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m offroad_path.world.preview", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="python -m offroad_path.world.preview", description=__doc__.splitlines()[0])
     parser.add_argument("sequences", help="a sequence folder or a folder of sequences")
     parser.add_argument("out", help="PNG to write")
     parser.add_argument("--rows", type=int, default=3)
