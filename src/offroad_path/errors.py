@@ -47,11 +47,12 @@ def clear_errors() -> Iterator[None]:
         raise SystemExit(EXIT_BAD_INPUT) from e
 
 
-def one_line(error: BaseException) -> str:
-    """An error's message and its cause's first line, on one line (Hydra's and OmegaConf's span several)."""
+def one_line(error: BaseException, with_cause: bool = False) -> str:
+    """An error's message on one line (Hydra's and OmegaConf's span several), and with_cause, its
+    cause's first line (OmegaConf says there which key was wrong)."""
     text = " ".join(line.strip() for line in str(error).split("\nConfig search path")[0].splitlines() if line.strip())
     cause = error.__cause__
-    if cause is not None and str(cause).strip() and str(cause).strip() not in text:
+    if with_cause and cause is not None and str(cause).strip() and str(cause).strip() not in text:
         text += f" ({str(cause).strip().splitlines()[0]})"
     return text
 

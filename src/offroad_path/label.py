@@ -93,12 +93,14 @@ def label(cfg: DictConfig) -> dict:
                 f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"])
             )
         (tmp / "summary.json").write_text(json.dumps({"metrics": metrics, "sequences": summaries}, indent=2) + "\n")
+        # Before the labels replace the last run's: a metrics file that cannot be written (a full
+        # disk) leaves both as they were.
+        write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n", "label")
         if run is not None:
             import mlflow
 
             mlflow.log_metrics(metrics)
             mlflow.log_artifact(str(tmp / "summary.json"))
-    write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n", "label")  # only once the labels are in place
     log.info(
         "labelled %d sequences: %d segments kept, %d dropped, %d labels written to %s%s",
         metrics["sequences"], metrics["labels"], metrics["segments_dropped"], metrics["labels"], out_dir,

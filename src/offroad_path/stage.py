@@ -144,7 +144,7 @@ def hydra_stage(stage: Stage) -> Callable[[], None]:
         try:
             main()
         except (HydraException, OmegaConfBaseException, ValueError) as e:
-            print(f"error: {one_line(e)}", file=sys.stderr)
+            print(f"error: {one_line(e, with_cause=True)}", file=sys.stderr)
             raise SystemExit(EXIT_BAD_INPUT) from e
 
     return entry

@@ -108,4 +108,4 @@ def write_report(e: DictConfig, test: TestSet, sections: list[Section], table: l
         for run, curve in test.curves.items():
             lines = ["threshold,precision,recall"] + [f"{t:.4f},{p:.6f},{r:.6f}" for t, p, r in zip(*curve.values(), strict=True)]
             (tmp / f"{run}.csv").write_text("\n".join(lines) + "\n")
-    write_text_atomic(e.metrics_path, json.dumps(report_metrics(sections), indent=2) + "\n", "evaluate")
+        write_text_atomic(e.metrics_path, json.dumps(report_metrics(sections), indent=2) + "\n", "evaluate")
