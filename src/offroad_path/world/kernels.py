@@ -16,11 +16,11 @@ from decimal import Decimal
 import numpy as np
 
 
-def gaussian_kernel(sigma: float) -> np.ndarray:
-    """Normalised 1D Gaussian weights over +-4 sigma (OpenCV's extent for float images), float64.
-    The exponentials in decimal arithmetic, correctly rounded: the C library's exp has CPU-specific
-    variants (FMA) too."""
-    radius = max(1, math.ceil(4.0 * sigma))
+def gaussian_kernel(sigma: float, extent: float = 4.0) -> np.ndarray:
+    """Normalised 1D Gaussian weights over +-extent sigma, float64 (OpenCV's extent: 4 for float
+    images, 3 for 8-bit ones). The exponentials in decimal arithmetic, correctly rounded: the C
+    library's exp has CPU-specific variants (FMA) too."""
+    radius = max(1, math.ceil(extent * sigma))
     with decimal.localcontext(prec=40):
         weights = [(Decimal("-0.5") * (Decimal(i) / Decimal(sigma)) ** 2).exp() for i in range(-radius, radius + 1)]
         total = sum(weights)
@@ -28,29 +28,36 @@ def gaussian_kernel(sigma: float) -> np.ndarray:
 
 
 def _convolve_axis(image: np.ndarray, weights: np.ndarray, axis: int) -> np.ndarray:
-    """`image` (float32 or float64) convolved with symmetric `weights` along `axis`, borders reflected as
-    OpenCV's BORDER_REFLECT_101 (gfedcb|abcdefgh|gfedcba): numpy's "reflect"."""
+    """`image` (float32 or float64) convolved with symmetric `weights` along `axis`, borders
+    reflected as OpenCV's BORDER_REFLECT_101 (gfedcb|abcdefgh|gfedcba): numpy's "reflect".
+    Mirrored taps are added first and multiplied once, always in the same order."""
     radius = len(weights) // 2
     n = image.shape[axis]
     pad = [(0, 0)] * image.ndim
     pad[axis] = (radius, radius)
     padded = np.pad(image, pad, mode="reflect") if n > 1 else np.pad(image, pad, mode="edge")
-    out = np.zeros(image.shape, image.dtype)
-    term = np.empty(image.shape, image.dtype)
-    window = [slice(None)] * image.ndim
-    for k, w in enumerate(weights):  # one tap at a time, always in this order
-        window[axis] = slice(k, k + n)
-        np.multiply(padded[tuple(window)], w, out=term)
-        out += term
+
+    def shifted(k: int) -> np.ndarray:
+        window = [slice(None)] * image.ndim
+        window[axis] = slice(radius + k, radius + k + n)
+        return padded[tuple(window)]
+
+    out = shifted(0) * weights[radius]
+    pair = np.empty(image.shape, image.dtype)
+    for k in range(1, radius + 1):
+        np.add(shifted(-k), shifted(k), out=pair)
+        pair *= weights[radius + k]
+        out += pair
     return out
 
 
 def gaussian_blur(image: np.ndarray, sigma: float) -> np.ndarray:
     """A separable Gaussian blur of a 2D array (rows, then columns), in image's dtype."""
+    integer = np.issubdtype(image.dtype, np.integer)
     work = np.float64 if image.dtype == np.float64 else np.float32  # 8-bit maps of 27 million cells: float32 halves the time
-    weights = gaussian_kernel(sigma).astype(work)
+    weights = gaussian_kernel(sigma, 3.0 if integer else 4.0).astype(work)
     blurred = _convolve_axis(_convolve_axis(image.astype(work), weights, 1), weights, 0)
-    if np.issubdtype(image.dtype, np.integer):  # rounded and saturated, as OpenCV's integer images
+    if integer:  # rounded and saturated, as OpenCV's integer images
         info = np.iinfo(image.dtype)
         return np.clip(np.rint(blurred), info.min, info.max).astype(image.dtype)
     return blurred.astype(image.dtype)
@@ -89,23 +96,32 @@ def resize_cubic(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 
 def sample_bilinear(image: np.ndarray, mx: np.ndarray, my: np.ndarray, wrap: bool = False) -> np.ndarray:
-    """Bilinear values (N,) or (N, channels) of `image` at fractional pixels (mx, my), in its dtype;
-    outside the image: its border replicated, or the image tiled (wrap)."""
+    """Bilinear values (N,) or (N, channels) of a float `image` at fractional pixels (mx, my), in
+    float32; outside the image: its border replicated, or the image tiled (wrap)."""
     n = len(mx)
     rows, cols = image.shape[:2]
+    flat = image.reshape(rows * cols, -1)
     if n == 0:
-        return np.zeros((0, *image.shape[2:]), image.dtype)
-    x = np.asarray(mx, np.float64)
-    y = np.asarray(my, np.float64)
-    x0, y0 = np.floor(x), np.floor(y)
-    ax, ay = x - x0, y - y0
-    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+        return np.zeros((0, *image.shape[2:]), np.float32)
+    x = np.asarray(mx, np.float32)
+    y = np.asarray(my, np.float32)
+    x0f, y0f = np.floor(x), np.floor(y)
+    ax, ay = x - x0f, y - y0f
+    x0, y0 = x0f.astype(np.intp), y0f.astype(np.intp)
     if wrap:
-        xs, ys = (np.mod(x0, cols), np.mod(x0 + 1, cols)), (np.mod(y0, rows), np.mod(y0 + 1, rows))
+        x0, y0 = np.mod(x0, cols), np.mod(y0, rows)
+        x1, y1 = np.where(x0 == cols - 1, 0, x0 + 1), np.where(y0 == rows - 1, 0, y0 + 1)
     else:
-        xs, ys = (np.clip(x0, 0, cols - 1), np.clip(x0 + 1, 0, cols - 1)), (np.clip(y0, 0, rows - 1), np.clip(y0 + 1, 0, rows - 1))
+        x1, y1 = np.clip(x0 + 1, 0, cols - 1), np.clip(y0 + 1, 0, rows - 1)
+        x0, y0 = np.clip(x0, 0, cols - 1), np.clip(y0, 0, rows - 1)
+    y0 *= cols
+    y1 *= cols
     if image.ndim == 3:
         ax, ay = ax[:, None], ay[:, None]
-    top = image[ys[0], xs[0]].astype(np.float64) * (1.0 - ax) + image[ys[0], xs[1]] * ax
-    bottom = image[ys[1], xs[0]].astype(np.float64) * (1.0 - ax) + image[ys[1], xs[1]] * ax
-    return (top * (1.0 - ay) + bottom * ay).astype(image.dtype)
+    else:
+        flat = flat[:, 0]
+    v00, v01 = flat.take(y0 + x0, axis=0), flat.take(y0 + x1, axis=0)
+    v10, v11 = flat.take(y1 + x0, axis=0), flat.take(y1 + x1, axis=0)
+    top = v00 + (v01 - v00) * ax
+    bottom = v10 + (v11 - v10) * ax
+    return (top + (bottom - top) * ay).astype(np.float32, copy=False)
