@@ -42,14 +42,23 @@ def sidecar(path: Path) -> Path:
 
 
 def check_output_dir(target: str | Path, key: str, stage: str) -> None:
-    """Refuse a folder output that exists and is not the output of `stage` (a folder with content and
-    no marker naming it). Checked again when the output is replaced: nothing else appeared meanwhile."""
+    """Refuse a folder output that exists and is not the output of `stage`: a file, or a folder
+    with content and no marker naming the stage. Checked before any work (utils.outputs) and again
+    when the output is replaced (nothing else appeared meanwhile)."""
     target = Path(target)
     if target.is_symlink() or (target.exists() and not target.is_dir()):
         raise UnsafeOutputError(f"{key}={target}: exists and is not a folder; it is left as it is. Choose another {key}")
-    if target.is_dir() and any(target.iterdir()) and marker_stage(target / MARKER) != stage:
+    if not target.is_dir() or not any(target.iterdir()):
+        return
+    owner = marker_stage(target / MARKER)
+    if owner is None:
         raise UnsafeOutputError(
-            f"{key}={target}: not an output of the {stage} stage (see its {MARKER}); not replaced. Choose another {key}"
+            f"{key}={target}: a folder this project did not write (no {MARKER} inside) is not replaced. "
+            f"Choose another {key}, or empty or remove it yourself"
+        )
+    if owner != stage:
+        raise UnsafeOutputError(
+            f"{key}={target}: holds the output of the {owner} stage, which {stage} does not replace; choose another {key}"
         )
 
 

@@ -16,7 +16,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from offroad_path.utils.atomic import MARKER, UnsafeOutputError, marker_stage, sidecar
+from offroad_path.utils.atomic import UnsafeOutputError, check_output_dir, marker_stage, sidecar
 
 _HELD: set[Path] = set()  # lock files of this process, for a stop by signal (release_locks)
 
@@ -47,23 +47,6 @@ def _writable_place(path: Path, key: str) -> None:
         raise UnsafeOutputError(f"{key}={path}: the folder {parent} is not writable; choose another {key}")
 
 
-def _check_folder(path: Path, key: str, stage: str) -> None:
-    if path.is_symlink() or (path.exists() and not path.is_dir()):
-        raise UnsafeOutputError(f"{key}={path}: exists and is not a folder; it is left as it is. Choose another {key}")
-    if not path.is_dir() or not any(path.iterdir()):
-        return
-    owner = marker_stage(path / MARKER)
-    if owner is None:
-        raise UnsafeOutputError(
-            f"{key}={path}: a folder this project did not write (no {MARKER} inside) is not replaced. "
-            f"Choose another {key}, or empty or remove it yourself"
-        )
-    if owner != stage:
-        raise UnsafeOutputError(
-            f"{key}={path}: holds the output of the {owner} stage, which {stage} does not replace; choose another {key}"
-        )
-
-
 def _check_file(path: Path, key: str, stage: str) -> None:
     if path.is_symlink() or (path.exists() and not path.is_file()):
         raise UnsafeOutputError(f"{key}={path}: exists and is not a file; it is left as it is. Choose another {key}")
@@ -87,7 +70,7 @@ def check_outputs(outputs: Outputs) -> None:
         for other_key, other, _ in declared[:i]:
             if _related(resolved, other.resolve()):
                 raise UnsafeOutputError(f"{key}={path}: overlaps {other_key}={other}, another output of this stage. Choose another {key}")
-        (_check_folder if is_folder else _check_file)(path, key, outputs.stage)
+        (check_output_dir if is_folder else _check_file)(path, key, outputs.stage)
         _writable_place(path, key)
 
 
