@@ -15,6 +15,7 @@ import pytest
 from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import prediction_name, read_manifest, read_predictions_manifest, write_predictions_manifest
 from offroad_path.evaluate import evaluate
+from offroad_path.evaluation.uncertainty import sample_blocks
 from offroad_path.postprocess import run_postprocess
 
 SHIFT_PX = 24
@@ -27,7 +28,8 @@ def stage_config(compose_config, split_dir: Path, root: Path, *overrides: str):
         f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
         f"evaluate.out_dir={root / 'evaluation'}", f"evaluate.metrics_path={root / 'metrics.json'}",
         f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}",
-        "evaluate.temporal.enabled=false", *overrides,  # made-up maps, no networks to run on every frame (tests/test_temporal.py)
+        "evaluate.temporal.enabled=false",  # made-up maps, no networks to run on every frame (tests/test_temporal.py)
+        "split.block_m=1", *overrides,  # the split fixture's test set is one 4 m block: resampled in blocks of 1 m
     )  # fmt: skip
 
 
@@ -83,9 +85,27 @@ def test_scores_match_the_known_predictions(scored):
     assert 0.8 < perfect_post.iou < 1.0 and perfect_post.recall > 0.95
 
 
+def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path):
+    rows, _, _ = scored
+    found = json.loads((tmp_path / "metrics.json").read_text())["uncertainty"]
+    labels_dir = Path(read_manifest(split_dir / "test.csv")[0].label).parents[2]
+    blocks = sample_blocks(read_manifest(split_dir / "test.csv"), labels_dir, 1.0)
+    assert found["test_set"]["blocks"] == len(set(blocks)) >= 2
+    assert found["unet-none.raw"] == {"iou": 1.0, "low": 1.0, "high": 1.0}  # perfect on every resample
+    shifted = found["fcn-none.raw"]
+    assert shifted["low"] <= shifted["iou"] <= shifted["high"] and shifted["iou"] == pytest.approx(rows[2].iou, abs=1e-6)
+    # The perfect maps beat the shifted ones in every block: the paired interval lies above 0.
+    difference = found["unet-none_vs_fcn-none"]
+    assert difference["iou_difference"] == pytest.approx(1 - rows[2].iou, abs=1e-6) and difference["low"] > 0
+    assert set(found) == {"test_set", "unet-none.raw", "unet-none.post-processed", "fcn-none.raw", "fcn-none.post-processed",
+                          "unet-none_vs_fcn-none", "unet-none_postprocessed_vs_raw", "fcn-none_postprocessed_vs_raw"}  # fmt: skip
+    report = (tmp_path / "evaluation" / "results.md").read_text()
+    assert "## Uncertainty" in report and "| U-Net (none) - FCN (none) |" in report
+
+
 def test_outputs_follow_the_contract(scored, tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert set(metrics) == {"unet-none", "fcn-none", "baselines", "steering_from_paths", "by_condition"}
+    assert set(metrics) == {"unet-none", "fcn-none", "uncertainty", "baselines", "steering_from_paths", "by_condition"}
     assert metrics["unet-none"]["raw"]["iou"] == 1.0
     # by condition (the rendered drive's conditions.csv): the perfect maps score 1 in every group that has frames
     groups = metrics["by_condition"]

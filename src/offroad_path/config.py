@@ -335,6 +335,15 @@ class TemporalConfig:
 
 
 @dataclass
+class BootstrapConfig:
+    """Intervals by resampling the test set's blocks of driving (offroad_path.evaluation.bootstrap)."""
+
+    resamples: int = setting(at_least(100))
+    seed: int = MISSING
+    level: float = setting(between(0, 1, low_open=True, high_open=True))
+
+
+@dataclass
 class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
@@ -345,6 +354,7 @@ class EvaluateConfig:
     steering_from_paths: SteeringFromPathsConfig = field(default_factory=SteeringFromPathsConfig)
     train_manifest: str = MISSING  # for the mean-path prior
     temporal: TemporalConfig = field(default_factory=TemporalConfig)
+    bootstrap: BootstrapConfig = field(default_factory=BootstrapConfig)
     real_labels_dir: str | None = MISSING  # a label run of real footage: every network scored on it too (null: none)
     threshold: float = setting(between(0, 1))  # path where C > threshold
     pr_thresholds: int = setting(at_least(2))

@@ -1,0 +1,94 @@
+"""The report's uncertainty section: a 95 % interval on every run's pooled IoU and a paired
+interval on every comparison the results table invites (network against network without
+pretraining, segmentation pretraining against none, post-processing against none), by resampling
+the test set's blocks of driving (evaluation.bootstrap). A difference whose interval holds 0 is
+stated as "no difference measured"."""
+
+from __future__ import annotations
+
+from itertools import combinations
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from offroad_path.data.labels import read_label_run
+from offroad_path.data.manifest import Sample
+from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, iou, paired_interval
+from offroad_path.evaluation.report import POSTPROCESSING, TestSet
+from offroad_path.evaluation.tables import method_title, split_run_name
+
+PP_TITLE = {"no": "raw", "yes": "post-processed"}
+
+
+def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> list[tuple[str, int]]:
+    """Each sample's block of driving, as the split formed them: (sequence, metres along its
+    label run's poses // block_m); a mirrored copy is in its frame's block."""
+    travelled = {run.name: run.distance() for run in read_label_run(labels_dir)}
+    return [(s.sequence, int(travelled[s.sequence][s.f0] // block_m)) for s in samples]
+
+
+Side = tuple[str, str]  # a run and its post-processing ("no" / "yes")
+
+
+def comparisons(runs: list[str]) -> list[tuple[str, str, Side, Side]]:
+    """(metrics key, title, a, b): the differences a - b the report states."""
+    pairs = []
+    scratch = [r for r in runs if split_run_name(r)[1] == "none"]
+    for a, b in combinations(scratch, 2):
+        pairs.append((f"{a}_vs_{b}", f"{method_title(a)} - {method_title(b)}", (a, "no"), (b, "no")))
+    for run in runs:
+        model, pretraining = split_run_name(run)
+        if pretraining != "none" and f"{model}-none" in runs:
+            base = f"{model}-none"
+            pairs.append((f"{run}_vs_{base}", f"{method_title(run)} - {method_title(base)}", (run, "no"), (base, "no")))
+    for run in runs:
+        pairs.append((f"{run}_postprocessed_vs_raw", f"{method_title(run)}: post-processed - raw", (run, "yes"), (run, "no")))
+    return pairs
+
+
+class Uncertainty:
+    """95 % block-bootstrap intervals (evaluate.bootstrap) on every run's IoU and on the comparisons."""
+
+    def __init__(self, e: DictConfig, block_m: float) -> None:
+        self.e, self.block_m = e, block_m
+        self.resampling = Resampling(e.bootstrap.resamples, e.bootstrap.seed, e.bootstrap.level)
+        self.blocks = 0
+        self.intervals: dict[tuple[str, str], Interval] = {}
+        self.differences: list[tuple[str, str, Interval]] = []  # (metrics key, title, a - b)
+
+    def score(self, test: TestSet) -> None:
+        blocks = sample_blocks(test.samples, Path(self.e.labels_dir), self.block_m)
+        self.blocks = len(set(blocks))
+        if self.blocks < 2:  # nothing to resample: the section says so
+            return
+        sums = {key: block_sums(counts, blocks) for key, counts in test.counts.items()}
+        self.intervals = {key: interval(s, iou, self.resampling) for key, s in sums.items()}
+        self.differences = [
+            (key, title, paired_interval(sums[a], sums[b], iou, self.resampling)) for key, title, a, b in comparisons(test.runs)
+        ]
+
+    def markdown(self) -> str:
+        r = self.resampling
+        if self.blocks < 2:
+            return f"\n## Uncertainty\n\nThe test set is {self.blocks} block of {self.block_m:g} m of driving: no interval can be drawn.\n"
+        lines = [
+            "\n## Uncertainty\n",
+            f"{r.level:.0%} percentile intervals from {r.count} resamples (seed {r.seed}) of the test set's {self.blocks} blocks of "
+            f"{self.block_m:g} m of driving, drawn with replacement; a comparison scores both methods on the same resamples "
+            "(paired). An interval that holds 0: no difference measured.\n",
+            "| method | IoU, raw [95 % interval] | IoU, post-processed [95 % interval] |",
+            "| --- | --- | --- |",
+        ]
+        runs = list(dict.fromkeys(run for run, _ in self.intervals))
+        lines += [f"| {method_title(run)} | " + " | ".join(self.intervals[run, pp].text() for pp in POSTPROCESSING) + " |" for run in runs]
+        lines += ["", "| comparison (IoU, a - b) | difference [95 % interval] |", "| --- | --- |"]
+        lines += [f"| {title} | {difference.difference_text()} |" for _, title, difference in self.differences]
+        return "\n".join(lines) + "\n"
+
+    def metrics(self) -> dict:
+        def entry(i: Interval, name: str) -> dict:
+            return {name: round(i.estimate, 6), "low": round(i.low, 6), "high": round(i.high, 6)}
+
+        intervals = {f"{run}.{PP_TITLE[pp]}": entry(i, "iou") for (run, pp), i in self.intervals.items()}
+        differences = {key: entry(i, "iou_difference") for key, _, i in self.differences}
+        return {"uncertainty": {"test_set": {"blocks": self.blocks}, **intervals, **differences}}
