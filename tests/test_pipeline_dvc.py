@@ -65,7 +65,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     # evaluate: every run with and without post-processing, the baselines, curves and figures.
     metrics = json.loads((repo_copy / "metrics" / "evaluation.json").read_text())
     assert set(metrics) == {f"{m}-{p}" for m in MODELS for p in ("none", "segmentation")} | {
-        "baselines", "steering_from_paths", "by_condition"}  # fmt: skip
+        "uncertainty", "baselines", "steering_from_paths", "by_condition"}  # fmt: skip
     assert all(0 <= metrics[r][pp]["accuracy"] <= 1 for r in metrics if "raw" in metrics[r] for pp in ("raw", "postprocessed"))
     # path against steering: PilotNet (train_steering ran before evaluate), every run, the ceiling
     runs = {r for r in metrics if "raw" in metrics[r]}
