@@ -97,7 +97,7 @@ def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path
     # The perfect maps beat the shifted ones in every block: the paired interval lies above 0.
     difference = found["unet-none_vs_fcn-none"]
     assert difference["iou_difference"] == pytest.approx(1 - rows[2].iou, abs=1e-6) and difference["low"] > 0
-    assert set(found) == {"test_set", "unet-none.raw", "unet-none.post-processed", "fcn-none.raw", "fcn-none.post-processed",
+    assert set(found) == {"test_set", "unet-none.raw", "unet-none.postprocessed", "fcn-none.raw", "fcn-none.postprocessed",
                           "unet-none_vs_fcn-none", "unet-none_postprocessed_vs_raw", "fcn-none_postprocessed_vs_raw"}  # fmt: skip
     report = (tmp_path / "evaluation" / "results.md").read_text()
     assert "## Uncertainty" in report and "| U-Net (none) - FCN (none) |" in report

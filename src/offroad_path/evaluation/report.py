@@ -25,6 +25,7 @@ from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger(__name__)
 POSTPROCESSING = ("no", "yes")
+PP_KEY = {"no": "raw", "yes": "postprocessed"}  # their names in metrics.json and MLflow
 
 
 @dataclass

@@ -16,7 +16,7 @@ from offroad_path.evaluation.conditions import ConditionTable, by_condition, rea
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases
 from offroad_path.evaluation.metrics import Scores, non_corresponding, per_image_iou, pooled
 from offroad_path.evaluation.real import RealFrames, RealRow, score_real
-from offroad_path.evaluation.report import POSTPROCESSING, TestSet
+from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, markdown_table, method_title, network_name, split_run_name
 from offroad_path.evaluation.temporal import TemporalRow, score_temporal
@@ -59,7 +59,7 @@ class ResultsTable:
                 "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(self.table()))  # fmt: skip
 
     def metrics(self) -> dict:
-        return {run: {"raw": numbers(self.rows[run, "no"]), "postprocessed": numbers(self.rows[run, "yes"])} for run in self.runs}
+        return {run: {PP_KEY[pp]: numbers(self.rows[run, pp]) for pp in POSTPROCESSING} for run in self.runs}
 
     def best_run(self, runs: list[str] | None = None) -> str:
         return max(runs or self.runs, key=lambda run: self.rows[run, "no"].iou)

@@ -14,17 +14,15 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, iou, paired_interval
-from offroad_path.evaluation.report import POSTPROCESSING, TestSet
+from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.tables import method_title, split_run_name
-
-PP_TITLE = {"no": "raw", "yes": "post-processed"}
 
 
 def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> list[tuple[str, int]]:
     """Each sample's block of driving, as the split formed them: (sequence, metres along its
     label run's poses // block_m); a mirrored copy is in its frame's block."""
     travelled = {run.name: run.distance() for run in read_label_run(labels_dir)}
-    return [(s.sequence, int(travelled[s.sequence][s.f0] // block_m)) for s in samples]
+    return [(s.sequence, int(travelled[s.sequence][s.f0] // block_m)) for s in samples]  # data.splitting's blocks
 
 
 Side = tuple[str, str]  # a run and its post-processing ("no" / "yes")
@@ -89,6 +87,6 @@ class Uncertainty:
         def entry(i: Interval, name: str) -> dict:
             return {name: round(i.estimate, 6), "low": round(i.low, 6), "high": round(i.high, 6)}
 
-        intervals = {f"{run}.{PP_TITLE[pp]}": entry(i, "iou") for (run, pp), i in self.intervals.items()}
+        intervals = {f"{run}.{PP_KEY[pp]}": entry(i, "iou") for (run, pp), i in self.intervals.items()}
         differences = {key: entry(i, "iou_difference") for key, _, i in self.differences}
         return {"uncertainty": {"test_set": {"blocks": self.blocks}, **intervals, **differences}}
