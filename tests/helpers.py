@@ -142,10 +142,11 @@ def tiny_repo(repo: Path) -> Path:
     """The project's pipeline in a fresh git + DVC repo at `repo`, on a tiny preset."""
     for item in ("conf", "src", "dvc.yaml", ".dvcignore"):
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
-    # Tiny but real: 12 frames of two drives, labels of the next 4 m every metre, one epoch; one
+    # Tiny but real: 12 frames of two drives and a test world, labels of the next 4 m every metre, one epoch; one
     # thread per stage, since two pipelines run at once (tests/test_pipeline_dvc.py).
     tiny = {
-        "world": {"frames": 12, "width": 256, "height": 144}, "synthesize": {"sequences": 2},
+        "world": {"frames": 12, "width": 256, "height": 144},
+        "synthesize": {"sequences": 2, "test_worlds": {"min_blocks": 3, "per_condition": 0}},  # one held-out test world
         "label": {"distance_m": 4.0, "stride_m": 1.0}, "split": {"block_m": 2.0, "guard_m": 1.0},
         "data": {"width": 64, "height": 48, "batch_size": 2}, "model": {"width": 0.125}, "trainer": {"max_epochs": 1},
         "pretrain": {"max_epochs": 1}, "steering": {"max_epochs": 1},

@@ -71,7 +71,7 @@ def test_grouping_pools_the_counts_of_each_group(tmp_path):
     )
     samples = [sample(tmp_path, 2), sample(tmp_path, 1), sample(tmp_path, 1, mirrored=True)]
     rows = read_conditions(samples)
-    assert [r["frame"] for r in rows] == ["2", "1", "1"]  # mirrored copies share their frame's row
+    assert [r["frame"] for r in rows] == [2, 1, 1]  # mirrored copies share their frame's row
     per_image = np.array([[6, 2, 90, 2], [1, 3, 90, 4], [3, 1, 90, 0]])  # tp, fp, tn, fn of each sample
     table = by_condition(rows, {"net": per_image})
     got = dict(zip(table.keys, zip(table.frames, table.iou["net"], strict=True), strict=True))
@@ -89,3 +89,6 @@ def test_recordings_without_conditions_get_no_table_and_a_short_table_is_an_erro
     (tmp_path / "drive" / "conditions.csv").write_text("frame,shadow,water,fork,surface,bend_radius_m\n0,0.0,False,False,dirt,50.0\n")
     with pytest.raises(ValueError, match=r"drive/conditions\.csv: has no row for frame 3"):
         read_conditions([sample(tmp_path, 3)])
+    (tmp_path / "drive" / "conditions.csv").write_text("frame,shadow,water,fork,surface,bend_radius_m\n0,0.0,maybe,False,dirt,50.0\n")
+    with pytest.raises(ValueError, match=r"drive/conditions\.csv: line 2: 'maybe' is not true"):
+        read_conditions([sample(tmp_path, 0)])

@@ -70,3 +70,44 @@ def test_split_stage_writes_manifests_with_mirrored_pairs(compose_config, labell
     assert sample.baseline_m == pytest.approx(0.21) and sample.fx == pytest.approx(305.089, abs=1e-3)
     assert json.loads((tmp_path / "split" / "summary.json").read_text()) == summary
     np.testing.assert_array_less(0, [len(p) for p in parts.values()])
+
+
+def test_held_out_worlds_are_the_whole_test_set(compose_config):
+    drives = frames_along(3, 100, 2.0)
+    worlds = [Frame(f"test_{s}", i, i * 2.0, held_out=True) for s in range(2) for i in range(30)]
+    c = compose_config("split.test_fraction=0.1", "split.val_fraction=0.1", "split.block_m=20", "split.seed=3").split
+    parts, _ = split_frames(drives + worlds, c)
+    assert parts["test"] == worlds  # no block of a drive: test_fraction takes none while test worlds exist
+    assert not any(f.held_out for f in parts["train"] + parts["val"])
+    assert 30 <= len(parts["val"]) <= 40  # val_fraction of the drives' frames
+    random, _ = split_frames(drives + worlds, compose_config("split.strategy=random", "split.seed=0").split)
+    assert random["test"] == worlds and len(random["val"]) == 30
+
+
+def test_split_stage_takes_a_held_out_recording_as_test_and_refuses_another_split_value(compose_config, labelled_drive, tmp_path):
+    import shutil
+
+    from offroad_path.data.labels import read_label_run
+
+    # A second copy of the drive's recording and labels, marked held out in its meta.json.
+    labels = tmp_path / "labels"
+    shutil.copytree(labelled_drive, labels)
+    recording = read_label_run(labels)[0].sequence.root
+    world = tmp_path / "recordings" / "world"
+    shutil.copytree(recording, world)
+    meta = json.loads((world / "meta.json").read_text())
+    (world / "meta.json").write_text(json.dumps(meta | {"split": "test"}))
+    run_summary = json.loads((labels / "summary.json").read_text())
+    (entry,) = run_summary["sequences"]
+    shutil.copytree(labels / entry["name"], labels / "world")
+    run_summary["sequences"].append(entry | {"name": "world", "root": str(world)})
+    (labels / "summary.json").write_text(json.dumps(run_summary))
+    overrides = (f"split.labels_dir={labels}", f"split.out_dir={tmp_path / 'split'}", "split.block_m=4", "split.guard_m=3")
+    summary = split(compose_config(*overrides))
+    test = read_manifest(tmp_path / "split" / "test.csv")
+    assert {s.sequence for s in test} == {"world"} and summary["test_worlds"] == ["world"]
+    assert summary["samples"]["test"] == 2 * len(list((labels / "world" / "label").glob("*.png")))
+    assert summary["test_blocks"] == len({int(d // 4) for d in read_label_run(labels)[1].distance()[[s.f0 for s in test]]})
+    (world / "meta.json").write_text(json.dumps(meta | {"split": "train"}))
+    with pytest.raises(ValueError, match=r"world/meta\.json: \"split\" is 'train'; the only value it may take is \"test\""):
+        split(compose_config(*overrides))

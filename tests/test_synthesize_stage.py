@@ -20,7 +20,9 @@ from offroad_path.synthesize import synthesize
 from offroad_path.utils.atomic import MARKER, atomic_directory
 from offroad_path.world.classes import CLASS_NAMES
 
-TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.height=96", "synthesize.workers=2")
+TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.height=96", "synthesize.workers=2",
+        "synthesize.test_worlds.min_blocks=0")  # fmt: skip
+HELD_OUT = ("synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.per_condition=0", "synthesize.test_worlds.horizon_m=0.5")
 
 
 def test_writes_the_sequence_contract(compose_config, tmp_path):
@@ -28,9 +30,10 @@ def test_writes_the_sequence_contract(compose_config, tmp_path):
     out.mkdir()
     (out / MARKER).write_text("synthesize\n")  # an earlier run's output: replaced whole
     (out / "stale.txt").write_text("from an earlier run")
-    cfg = compose_config(*TINY, f"synthesize.out_dir={out}", "world/rig=gopro")
+    cfg = compose_config(*TINY, *HELD_OUT, f"synthesize.out_dir={out}", "world/rig=gopro")
     synthesize(cfg)
-    assert sorted(p.name for p in out.iterdir()) == [MARKER, "seq_000", "seq_001", "summary.json"]  # rewritten whole
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "seq_000", "seq_001", "summary.json", "test_000"]  # rewritten whole
+    assert open_sequence(out / "test_000").meta["split"] == "test" and "split" not in open_sequence(out / "seq_001").meta
     assert not list(tmp_path.glob(".synthetic*"))  # no temporary leftovers
     seq = open_sequence(out / "seq_000")
     assert len(seq) == 3 and seq.image_size == (160, 96)
@@ -53,7 +56,8 @@ def test_writes_the_sequence_contract(compose_config, tmp_path):
     world_from_cam = np.array(meta["world_from_first_camera"])
     np.testing.assert_allclose(world_from_cam[:3, :3] @ world_from_cam[:3, :3].T, np.eye(3), atol=1e-9)
     summary = json.loads((out / "summary.json").read_text())
-    assert [s["frames"] for s in summary["sequences"]] == [3, 3]
+    assert [s["frames"] for s in summary["sequences"]] == [3, 3, 3]
+    assert [(w["name"], w["blocks"]) for w in summary["test_worlds"]] == [("test_000", 1)]
 
 
 def test_atomic_directory_keeps_the_old_output_on_failure(tmp_path):

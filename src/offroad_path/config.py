@@ -91,9 +91,19 @@ class WorldConfig:
 
 
 @dataclass
+class TestWorldsConfig:
+    min_blocks: int = setting(at_least(0))  # 0: no test worlds (the split takes test blocks from the drives)
+    per_condition: int = setting(at_least(0))  # test worlds that must show each condition group
+    block_m: float = setting(positive())
+    horizon_m: float = setting(positive())  # the last metres of a drive, which get no label
+    max_candidates: int = setting(at_least(1))
+
+
+@dataclass
 class SynthesizeConfig:
     sequences: int = setting(at_least(1))
     seed: int = MISSING
+    test_worlds: TestWorldsConfig = field(default_factory=TestWorldsConfig)
     workers: int = setting(at_least(0))  # 0: one per CPU core
     out_dir: str = MISSING
 

@@ -16,7 +16,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.labels import label_run_folders, read_label_run
 from offroad_path.data.manifest import Sample, data_root, write_manifest
-from offroad_path.data.splitting import Frame, split_frames
+from offroad_path.data.splitting import Frame, block_of, split_frames
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory
 from offroad_path.utils.outputs import Outputs
@@ -25,17 +25,26 @@ log = logging.getLogger("offroad_path.split")
 
 
 def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int], Sample]]:
-    """Every labelled f0 under labels_dir, with its position along the path and its sample row."""
+    """Every labelled f0 under labels_dir, with its position along the path, whether it comes from
+    a held-out test world, and its sample row."""
     frames, samples = [], {}
     for run in read_label_run(labels_dir):
         name, seq, travelled = run.name, run.sequence, run.distance()
+        held_out = held_out_recording(seq.meta, seq.root / "meta.json")
         for label in run.labels():
             f0 = int(label.stem)
-            frames.append(Frame(name, f0, float(travelled[f0])))
+            frames.append(Frame(name, f0, float(travelled[f0]), held_out))
             semantic = str(seq.semantic[f0]) if seq.semantic is not None else ""
             samples[(name, f0)] = Sample(name, f0, False, str(seq.left[f0]), str(label), str(run.folder / "disparity" / label.name),
                                          semantic, seq.calibration.fx, seq.calibration.baseline_m)  # fmt: skip
     return frames, samples
+
+
+def held_out_recording(meta: dict, path: Path) -> bool:
+    """Whether a recording is a held-out test world: meta.json's "split" is "test" (absent: no)."""
+    if meta.get("split", "test") != "test":
+        raise ValueError(f'{path}: "split" is {meta["split"]!r}; the only value it may take is "test" (a held-out test world)')
+    return "split" in meta
 
 
 def outputs(cfg: DictConfig) -> Outputs:
@@ -61,11 +70,14 @@ def split(cfg: DictConfig) -> dict:
                     rows.append(Sample(**{**sample.__dict__, "mirrored": True}))
             write_manifest(tmp / f"{name}.csv", rows)
             counts[name] = len(rows)
+        worlds = sorted({f.sequence for f in frames if f.held_out})
+        test_blocks = len({block_of(f.sequence, f.travelled_m, c.block_m) for f in parts["test"]})
         summary = {"frames": len(frames), "guarded_out": guarded, "samples": counts, "strategy": c.strategy, "mirror": c.mirror,
-                   "data_root": data_root(listed)}  # fmt: skip
+                   "test_worlds": worlds, "test_blocks": test_blocks, "data_root": data_root(listed)}  # fmt: skip
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    log.info("split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones",
-             len(frames), counts, " (with mirrored copies)" if c.mirror else "", guarded)  # fmt: skip
+    log.info("split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones; test: %d blocks of driving%s",
+             len(frames), counts, " (with mirrored copies)" if c.mirror else "", guarded, test_blocks,
+             f" from {len(worlds)} held-out test worlds" if worlds else " from the drives")  # fmt: skip
     return summary
 
 

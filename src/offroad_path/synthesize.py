@@ -1,6 +1,9 @@
 """Stage `synthesize`: render the embedded synthetic stereo off-road world (see docs/design.md).
 
 python -m offroad_path.synthesize [experiment=paper] [world/rig=gopro] [synthesize.sequences=4]
+
+The training drives seq_NNN, then the held-out test worlds test_NNN (offroad_path.world.held_out),
+whose meta.json says "split": "test".
 """
 
 from __future__ import annotations
@@ -14,7 +17,8 @@ from offroad_path.stage import hydra_stage, log, reads
 from offroad_path.utils.atomic import atomic_directory
 from offroad_path.utils.outputs import Outputs
 from offroad_path.world.classes import CLASS_NAMES
-from offroad_path.world.record import record_sequences
+from offroad_path.world.held_out import choose_held_out_worlds
+from offroad_path.world.record import record_sequences, sequence_seed
 
 
 def outputs(cfg: DictConfig) -> Outputs:
@@ -25,12 +29,18 @@ def outputs(cfg: DictConfig) -> Outputs:
 def synthesize(cfg: DictConfig) -> list[dict]:
     out_dir = Path(cfg.synthesize.out_dir)
     with atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:
-        summaries = record_sequences(cfg.world, cfg.synthesize.sequences, cfg.synthesize.seed, tmp, cfg.synthesize.workers)
-        report = {"classes": list(CLASS_NAMES), "sequences": summaries}
+        c = cfg.synthesize
+        held_out = choose_held_out_worlds(cfg.world, c.test_worlds, c.seed, c.workers)
+        drives = [(f"seq_{i:03d}", sequence_seed(c.seed, i), False) for i in range(c.sequences)]
+        drives += [(w.name, w.seed, True) for w in held_out]
+        summaries = record_sequences(cfg.world, drives, tmp, c.workers)
+        tested = [{"name": w.name, "blocks": w.blocks, "condition_groups": list(w.groups)} for w in held_out]
+        report = {"classes": list(CLASS_NAMES), "sequences": summaries, "test_worlds": tested}
         (tmp / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     frames = sum(s["frames"] for s in summaries)
     distance = sum(s["distance_m"] for s in summaries)
-    log.info("wrote %d sequences (%d stereo frames, %.0f m driven) to %s", len(summaries), frames, distance, out_dir)
+    log.info("wrote %d sequences, %d of them held-out test worlds (%d stereo frames, %.0f m driven) to %s",
+             len(summaries), len(tested), frames, distance, out_dir)  # fmt: skip
     return summaries
 
 

@@ -2,8 +2,12 @@
 
 Labels a few metres apart show nearly the same scene, so a per-image random split (the paper's)
 puts near-duplicates on both sides. Here frames are grouped into blocks of `block_m` metres of
-driving within each sequence; whole blocks go to test and validation, and training frames within
-`guard_m` of a held-out frame are left out, so no held-out frame has a neighbour in training.
+driving within each sequence; whole blocks go to validation (and to test), and training frames
+within `guard_m` of a held-out frame are left out, so no held-out frame has a neighbour in training.
+
+Frames of held-out test worlds (a recording whose meta.json says "split": "test", as the
+synthesize stage's test_NNN drives do) are the whole test set when there are any; test_fraction
+then takes no blocks from the other drives.
 """
 
 from __future__ import annotations
@@ -26,6 +30,12 @@ class Frame:
     sequence: str
     f0: int
     travelled_m: float  # position along the sequence's driven path at f0
+    held_out: bool = False  # from a held-out test world
+
+
+def block_of(sequence: str, travelled_m: float, block_m: float) -> tuple[str, int]:
+    """The block of driving a frame belongs to: its sequence and the block_m-long stretch of it."""
+    return sequence, int(travelled_m // block_m)
 
 
 def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Frame]], int]:
@@ -34,21 +44,24 @@ def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Fr
     if c.strategy not in STRATEGIES:
         raise ValueError(f"unknown split strategy {c.strategy!r}; valid: {', '.join(STRATEGIES)}")
     rng = np.random.default_rng(c.seed)
-    test_fraction, val_fraction, block_m = c.test_fraction, c.val_fraction, c.block_m
+    worlds = [f for f in frames if f.held_out]
+    frames = [f for f in frames if not f.held_out]
+    test_fraction = 0.0 if worlds else c.test_fraction
     if c.strategy == "random":
         log.warning("split strategy 'random' (the paper's per-image split) puts near-duplicate neighbours in train and test")
         order = rng.permutation(len(frames))
-        n_test, n_val = round(test_fraction * len(frames)), round(val_fraction * len(frames))
+        n_test, n_val = round(test_fraction * len(frames)), round(c.val_fraction * len(frames))
         picked = [frames[i] for i in order]
-        return {"test": picked[:n_test], "val": picked[n_test : n_test + n_val], "train": picked[n_test + n_val :]}, 0
+        split = {"test": worlds + picked[:n_test], "val": picked[n_test : n_test + n_val], "train": picked[n_test + n_val :]}
+        return split, 0
 
     groups: dict[tuple[str, int], list[Frame]] = {}
     for frame in frames:
-        groups.setdefault((frame.sequence, int(frame.travelled_m // block_m)), []).append(frame)
+        groups.setdefault(block_of(frame.sequence, frame.travelled_m, c.block_m), []).append(frame)
     keys = sorted(groups)
     order = [keys[i] for i in rng.permutation(len(keys))]
     split: dict[str, list[Frame]] = {"test": [], "val": [], "train": []}
-    targets = {"test": test_fraction * len(frames), "val": val_fraction * len(frames)}
+    targets = {"test": test_fraction * len(frames), "val": c.val_fraction * len(frames)}
     for key in order:
         for name in ("test", "val"):
             if len(split[name]) < targets[name]:
@@ -62,6 +75,7 @@ def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Fr
     train = [f for f in split["train"] if not _near(f, held_out, c.guard_m)]
     guarded = len(split["train"]) - len(train)
     split["train"] = train
+    split["test"] += worlds
     for name in split:
         split[name].sort(key=lambda f: (f.sequence, f.f0))
     return split, guarded

@@ -6,7 +6,6 @@ cases are shadows, water and forks). Recordings without conditions.csv get no su
 from __future__ import annotations
 
 import csv
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,22 +14,13 @@ import numpy as np
 from offroad_path.data.manifest import Sample, parse_boolean
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.tables import fmt
+from offroad_path.world.groups import GROUPS
 
-SHADOW_FRACTION = 0.1  # of the corridor, for "shadow on the path"
-# (key, title, test on a frame's conditions row): a frame may be in several groups.
-CONDITIONS: list[tuple[str, str, Callable[[dict], bool]]] = [
-    ("all", "all test frames", lambda r: True),
-    ("shadow", f"shadow on the path (>= {SHADOW_FRACTION:.0%} of it)", lambda r: float(r["shadow"]) >= SHADOW_FRACTION),
-    ("no_shadow", "no shadow on the path", lambda r: float(r["shadow"]) < SHADOW_FRACTION),
-    ("water", "water on or near the path", lambda r: parse_boolean(r["water"])),
-    ("fork", "a fork in view", lambda r: parse_boolean(r["fork"])),
-    ("off_track", "off the track (mostly grass)", lambda r: r["surface"] == "grass"),
-    ("paved", "paved road", lambda r: r["surface"] == "paved"),
-    ("dirt", "dirt track", lambda r: r["surface"] == "dirt"),
-    ("sharp_bend", "bend radius below 20 m", lambda r: float(r["bend_radius_m"]) < 20),
-    ("bend", "bend radius 20 to 30 m", lambda r: 20 <= float(r["bend_radius_m"]) < 30),
-    ("gentle", "bend radius 30 m or more", lambda r: float(r["bend_radius_m"]) >= 30),
-]
+
+def parse_row(row: dict[str, str]) -> dict:
+    """A conditions.csv row with its columns typed as frame_conditions writes them."""
+    return {"frame": int(row["frame"]), "shadow": float(row["shadow"]), "water": parse_boolean(row["water"]),
+            "fork": parse_boolean(row["fork"]), "surface": row["surface"], "bend_radius_m": float(row["bend_radius_m"])}  # fmt: skip
 
 
 def read_conditions(samples: list[Sample]) -> list[dict] | None:
@@ -42,13 +32,23 @@ def read_conditions(samples: list[Sample]) -> list[dict] | None:
         root = Path(sample.image).parents[1]
         if root not in tables:
             path = root / "conditions.csv"
-            tables[root] = list(csv.DictReader(path.open())) if path.is_file() else None
+            tables[root] = _read_table(path) if path.is_file() else None
         table = tables[root]
         if table is None:
             return None
-        if sample.f0 >= len(table) or int(table[sample.f0]["frame"]) != sample.f0:
+        if sample.f0 >= len(table) or table[sample.f0]["frame"] != sample.f0:
             raise ValueError(f"{root / 'conditions.csv'}: has no row for frame {sample.f0}")
         rows.append(table[sample.f0])
+    return rows
+
+
+def _read_table(path: Path) -> list[dict]:
+    rows = []
+    for number, row in enumerate(csv.DictReader(path.open()), start=2):
+        try:
+            rows.append(parse_row(row))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"{path}: line {number}: {e}") from None
     return rows
 
 
@@ -78,6 +78,6 @@ class ConditionTable:
 
 def by_condition(conditions: list[dict], per_image: dict[str, np.ndarray]) -> ConditionTable:
     """per_image: method -> its (N, 4) per-image counts [tp, fp, tn, fn] over the same samples."""
-    masks = [np.array([test(row) for row in conditions], bool) for _, _, test in CONDITIONS]
+    masks = [np.array([test(row) for row in conditions], bool) for _, _, test in GROUPS]
     iou = {m: [pooled(counts[mask]).iou if mask.any() else float("nan") for mask in masks] for m, counts in per_image.items()}
-    return ConditionTable([k for k, _, _ in CONDITIONS], [t for _, t, _ in CONDITIONS], [int(m.sum()) for m in masks], iou)
+    return ConditionTable([k for k, _, _ in GROUPS], [t for _, t, _ in GROUPS], [int(m.sum()) for m in masks], iou)

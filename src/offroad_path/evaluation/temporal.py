@@ -25,6 +25,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.labels import LabelledSequence, read_label_run
 from offroad_path.data.manifest import Sample
+from offroad_path.data.splitting import block_of
 from offroad_path.evaluation.metrics import counts, pooled
 from offroad_path.evaluation.tables import method_title
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
@@ -65,7 +66,7 @@ def held_out_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> 
         run = runs[sample.sequence]
         if run.sequence.poses is None or run.sequence.depth is None:
             return None
-        groups.setdefault((sample.sequence, int(run.distance()[sample.f0] // block_m)), []).append(sample.f0)
+        groups.setdefault(block_of(sample.sequence, run.distance()[sample.f0], block_m), []).append(sample.f0)
     return [Block(runs[name], list(range(min(f0s), max(f0s) + 1))) for (name, _), f0s in sorted(groups.items())]
 
 

@@ -13,6 +13,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
+from offroad_path.data.splitting import block_of
 from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, iou, paired_interval
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.tables import method_title, split_run_name
@@ -22,7 +23,7 @@ def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> li
     """Each sample's block of driving, as the split formed them: (sequence, metres along its
     label run's poses // block_m); a mirrored copy is in its frame's block."""
     travelled = {run.name: run.distance() for run in read_label_run(labels_dir)}
-    return [(s.sequence, int(travelled[s.sequence][s.f0] // block_m)) for s in samples]  # data.splitting's blocks
+    return [block_of(s.sequence, travelled[s.sequence][s.f0], block_m) for s in samples]
 
 
 Side = tuple[str, str]  # a run and its post-processing ("no" / "yes")

@@ -45,8 +45,9 @@ def encode_depth(depth_m: np.ndarray) -> np.ndarray:
     return np.where(depth_m > 0, mm, 0).astype(np.uint16)
 
 
-def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path) -> dict:
-    """Render one sequence into out_dir; returns a summary (frames, distance, class pixel counts)."""
+def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool = False) -> dict:
+    """Render one sequence into out_dir; returns a summary (frames, distance, class pixel counts).
+    held_out: a test world (meta.json's "split": "test"), which the split stage keeps for testing."""
     world = build_world(cfg, seed)
     camera = camera_for(cfg)
     rays = camera.rays()
@@ -100,23 +101,24 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path) -> dict:
         "world_frame": "x right, y down (gravity), z forward at the start",
         "distance_m": distance,
         "frames": len(world.poses),
-    }
+    } | ({"split": "test"} if held_out else {})
     (out_dir / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
-    return {"name": out_dir.name, "frames": len(world.poses), "distance_m": distance, "class_pixels": class_pixels.tolist()}
+    summary = {"name": out_dir.name, "seed": seed, "frames": len(world.poses), "distance_m": distance}
+    return summary | ({"split": "test"} if held_out else {}) | {"class_pixels": class_pixels.tolist()}
 
 
-def _record_job(args: tuple[WorldConfig, int, str]) -> dict:
+def _record_job(args: tuple[WorldConfig, int, str, bool]) -> dict:
     cv2.setNumThreads(1)  # one process per core: no nested threading
-    cfg, seed, out_dir = args
-    return record_sequence(cfg, seed, Path(out_dir))
+    cfg, seed, out_dir, held_out = args
+    return record_sequence(cfg, seed, Path(out_dir), held_out)
 
 
-def record_sequences(cfg: WorldConfig, count: int, master_seed: int, out_dir: Path, workers: int = 0) -> list[dict]:
-    """Render `count` sequences into out_dir/seq_NNN in parallel, one process per worker."""
-    jobs = [(cfg, sequence_seed(master_seed, i), str(out_dir / f"seq_{i:03d}")) for i in range(count)]
+def record_sequences(cfg: WorldConfig, drives: list[tuple[str, int, bool]], out_dir: Path, workers: int = 0) -> list[dict]:
+    """Render each drive (name, seed, held out) into out_dir/<name> in parallel, one process per worker."""
+    jobs = [(cfg, seed, str(out_dir / name), held_out) for name, seed, held_out in drives]
     start = time.perf_counter()
-    summaries = map_processes(_record_job, jobs, workers, [f"sequence seq_{i:03d}" for i in range(count)])
+    summaries = map_processes(_record_job, jobs, workers, [f"sequence {name}" for name, _, _ in drives])
     elapsed = time.perf_counter() - start
     frames = sum(s["frames"] for s in summaries)
-    log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", count, frames, elapsed, frames / elapsed)
+    log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", len(drives), frames, elapsed, frames / elapsed)
     return summaries
