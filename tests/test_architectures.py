@@ -79,6 +79,6 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
     subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
     listed = subprocess.run([sys.executable, "-m", "dvc", "stage", "list", "--name-only"], cwd=repo, capture_output=True, text=True)
     stages = set(listed.stdout.split())
-    new = {"pretrain@tiny", "train_scratch@tiny", "train_pretrained@tiny", "postprocess@tiny-none", "postprocess@tiny-segmentation"}
+    new = {"pretrain@tiny", "train_scratch@tiny-0", "train_pretrained@tiny-0", "postprocess@tiny-none-0", "postprocess@tiny-segmentation-0"}
     assert new <= stages, listed.stdout + listed.stderr
     assert len(stages) == 5 + 4 * 5  # synthesize, label, split, evaluate, train_steering; 5 per network

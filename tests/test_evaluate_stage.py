@@ -39,7 +39,7 @@ def scored(compose_config, split_dir, tmp_path):
     labels = load_labels(samples).astype(np.float32)
     made = {"unet-none": labels, "fcn-none": 0.9 * np.roll(labels, SHIFT_PX, axis=2)}
     for run, maps in made.items():
-        out = tmp_path / "runs" / run / "predictions"
+        out = tmp_path / "runs" / run / "seed0" / "predictions"
         rows = []
         for sample, m in zip(samples, maps, strict=True):
             (out / sample.sequence).mkdir(parents=True, exist_ok=True)
@@ -47,8 +47,9 @@ def scored(compose_config, split_dir, tmp_path):
             rows.append((sample, str(out / prediction_name(sample))))
         write_predictions_manifest(out / "manifest.csv", rows)
         model, pretraining = run.split("-")
+        post = tmp_path / "post" / run / "seed0"
         run_postprocess(stage_config(compose_config, split_dir, tmp_path, f"model={model}", f"pretraining={pretraining}",
-                                     f"postprocess.predictions_dir={out}", f"postprocess.out_dir={tmp_path / 'post' / run}"))  # fmt: skip
+                                     f"postprocess.predictions_dir={out}", f"postprocess.out_dir={post}"))  # fmt: skip
     write_pilotnet_predictions(samples, tmp_path / "steering" / "predictions.csv")
     rows = evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]"))
     return rows, labels.astype(bool), made
@@ -109,7 +110,7 @@ def test_outputs_follow_the_contract(scored, tmp_path):
     assert metrics["unet-none"]["raw"]["iou"] == 1.0
     # by condition (the rendered drive's conditions.csv): the perfect maps score 1 in every group that has frames
     groups = metrics["by_condition"]
-    assert groups["all"]["frames"] == len(read_predictions_manifest(tmp_path / "runs" / "unet-none" / "predictions" / "manifest.csv"))
+    assert groups["all"]["frames"] == len(read_predictions_manifest(tmp_path / "runs/unet-none/seed0/predictions/manifest.csv"))
     assert all(g["unet-none"] == 1.0 for g in groups.values() if g["frames"])
     assert groups["all"]["fcn-none"] == metrics["fcn-none"]["raw"]["iou"]
     assert "## Results by condition" in (tmp_path / "evaluation" / "results.md").read_text()
@@ -119,12 +120,12 @@ def test_outputs_follow_the_contract(scored, tmp_path):
     curve = np.loadtxt(tmp_path / "pr" / "unet-none.csv", delimiter=",", skiprows=1)
     assert curve.shape == (101, 3) and np.allclose(curve[1:-1, 1:], 1.0)  # perfect at every threshold inside (0, 1)
     assert sorted(p.name for p in (tmp_path / "evaluation" / "figures").iterdir()) == ["good_and_bad_cases.png", "postprocessing.png"]
-    raw = read_predictions_manifest(tmp_path / "runs" / "unet-none" / "predictions" / "manifest.csv")
-    post = read_predictions_manifest(tmp_path / "post" / "unet-none" / "manifest.csv")
+    raw = read_predictions_manifest(tmp_path / "runs/unet-none/seed0/predictions/manifest.csv")
+    post = read_predictions_manifest(tmp_path / "post/unet-none/seed0/manifest.csv")
     assert [s for s, _ in post] == [s for s, _ in raw]
     for (_, a), (_, b) in zip(raw, post, strict=True):
         before, after = np.load(a), np.load(b)
-        assert after.dtype == np.float16 and after.shape == before.shape and Path(b).parent.parent == tmp_path / "post" / "unet-none"
+        assert after.dtype == np.float16 and after.shape == before.shape and Path(b).parent.parent == tmp_path / "post/unet-none/seed0"
     with sqlite3.connect(tmp_path / "mlflow.db") as db:
         (value,) = db.execute("select value from metrics where key = 'unet-none.raw.iou'").fetchone()
     assert value == 1.0
@@ -150,6 +151,6 @@ def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path
            f"evaluate.plots_dir={tmp_path / 'pr'}", "mlflow.enabled=false"]  # fmt: skip
     run = subprocess.run(cli, capture_output=True, text=True)
     assert run.returncode == 2
-    manifest = tmp_path / "runs" / "segnet-none" / "predictions" / "manifest.csv"
+    manifest = tmp_path / "runs" / "segnet-none" / "seed0" / "predictions" / "manifest.csv"
     assert run.stderr.strip().splitlines()[-1] == f"error: {manifest}: manifest is missing (run the train stage first)"
     assert not any(tmp_path.iterdir())

@@ -41,10 +41,9 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     elsewhere = narrowed(tiny_repo(repo_copy.parent / "another" / "place" / "repo"), "unet")
     out, _ = dvc_at_once([repo_copy, elsewhere], "repro")
     ran = set(re.findall(r"Running stage '([^']+)'", out))
-    stages = {"synthesize", "label", "split", "evaluate", "train_steering"} | {
-        f"{s}@{m}" for s in ("pretrain", "train_scratch", "train_pretrained") for m in MODELS
-    }
-    stages |= {f"postprocess@{m}-{p}" for m in MODELS for p in ("none", "segmentation")}
+    stages = {"synthesize", "label", "split", "evaluate", "train_steering"} | {f"pretrain@{m}" for m in MODELS}
+    stages |= {f"{s}@{m}-0" for s in ("train_scratch", "train_pretrained") for m in MODELS}
+    stages |= {f"postprocess@{m}-{p}-0" for m in MODELS for p in ("none", "segmentation")}
     assert ran == stages
     here, there = lock_entries(repo_copy), lock_entries(elsewhere)
     assert set(there) == {s for s in stages if "@" not in s or "unet" in s}
@@ -59,9 +58,9 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     assert json.loads((repo_copy / "metrics" / "label.json").read_text())["labels"] > 0
     for model in MODELS:
         for pretraining in ("none", "segmentation"):
-            run = repo_copy / "data" / "runs" / f"{model}-{pretraining}"
+            run = repo_copy / "data" / "runs" / f"{model}-{pretraining}" / "seed0"
             assert (run / "predictions" / "manifest.csv").is_file() and (run / "checkpoints" / "best.ckpt").is_file()
-            assert (repo_copy / "data" / "postprocessed" / f"{model}-{pretraining}" / "manifest.csv").is_file()
+            assert (repo_copy / "data" / "postprocessed" / f"{model}-{pretraining}" / "seed0" / "manifest.csv").is_file()
     # evaluate: every run with and without post-processing, the baselines, curves and figures.
     metrics = json.loads((repo_copy / "metrics" / "evaluation.json").read_text())
     assert set(metrics) == {f"{m}-{p}" for m in MODELS for p in ("none", "segmentation")} | {
@@ -82,8 +81,8 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     git(repo_copy, "add", "-A")
     git(repo_copy, "commit", "-q", "-m", "baseline")
     ran = set(re.findall(r"Running stage '([^']+)'", dvc(repo_copy, "exp", "run", "-S", "conf/model/unet.yaml:lr=0.05")))
-    assert ran == {"pretrain@unet", "train_scratch@unet", "train_pretrained@unet", "postprocess@unet-none", "postprocess@unet-segmentation",
-                   "evaluate"}  # fmt: skip
+    assert ran == {"pretrain@unet", "train_scratch@unet-0", "train_pretrained@unet-0", "postprocess@unet-none-0",
+                   "postprocess@unet-segmentation-0", "evaluate"}  # fmt: skip
     assert "unet.yaml:lr" in dvc(repo_copy, "exp", "show", "--md")
     # The notebooks run top to bottom on these outputs. The results notebook also reads the
     # evaluation's MLflow run, which the tiny preset does not log: one more evaluate logs it.

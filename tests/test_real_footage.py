@@ -3,8 +3,6 @@ VO labels, against each frame's own label and against the other frames' labels."
 
 from __future__ import annotations
 
-import shutil
-
 import numpy as np
 import pytest
 
@@ -27,14 +25,12 @@ def kitti_labels(compose_config, kitti_snippet, tmp_path_factory):
 
 def test_a_network_and_the_prior_on_the_real_snippet(kitti_labels, trained, tmp_path):
     checkpoint, _, _ = trained
-    (tmp_path / "runs" / "unet-none" / "checkpoints").mkdir(parents=True)
-    shutil.copy(checkpoint, tmp_path / "runs" / "unet-none" / "checkpoints" / "best.ckpt")
     frames = RealFrames.read(kitti_labels)
     n, h, w = frames.labels.shape
     assert n >= 5 and (h, w) == (370, 1226) and len(frames.images) == n  # the snippet's own frame size
     prior = np.zeros((288, 512), bool)
     prior[144:, 128:384] = True  # the bottom half's middle, at the synthetic label size
-    rows = score_real(["unet-none"], tmp_path / "runs", frames, prior, 0.5)
+    rows = score_real({"unet-none": checkpoint}, frames, prior, 0.5)
     assert list(rows) == ["unet-none", "mean_path_prior"]
     # The prior stretched to 1226 x 370 (nearest neighbour) covers rows from 144 * 370 / 288 = 185 and
     # columns from 128 * 1226 / 512 = 306.5 to 384 * 1226 / 512 = 919.5.

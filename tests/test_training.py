@@ -208,3 +208,27 @@ def test_unknown_choices_list_the_valid_ones(compose_config, split_dir, tmp_path
 def test_same_seed_same_metrics(compose_config, split_dir, tmp_path, tiny_config):
     runs = [train(tiny_config(tmp_path / str(i), "model=segnet", "trainer.max_epochs=1", "mlflow.enabled=false")) for i in range(2)]
     assert runs[0] == runs[1]
+
+
+def test_the_schedule_warms_up_then_steps_at_fractions_of_the_run():
+    import lightning as L
+
+    from offroad_path.training.task import SegmentationTask
+
+    task = SegmentationTask(model="unet", num_classes=2, width=0.125, lr=0.1, lr_milestones=[0.5, 0.75], lr_gamma=0.1,
+                            lr_warmup=0.2, momentum=0.9, weight_decay=0.0, channels_last=False)  # fmt: skip
+    task.trainer = L.Trainer(max_steps=20, accelerator="cpu", logger=False, enable_checkpointing=False)
+    config = task.configure_optimizers()
+    optimizer, scheduler = config["optimizer"], config["lr_scheduler"]["scheduler"]
+    assert config["lr_scheduler"]["interval"] == "step"
+    rates = []
+    for _ in range(20):
+        rates.append(optimizer.param_groups[0]["lr"])
+        optimizer.step()
+        scheduler.step()
+    expected = [0.1 * (k + 1) / 4 for k in range(4)] + [0.1] * 6 + [0.01] * 5 + [0.001] * 5  # 4 warm-up steps, then /10 at 10 and 15
+    np.testing.assert_allclose(rates, expected, rtol=1e-9)
+    fixed = SegmentationTask.for_inference(dict(task.hparams) | {"lr_milestones": [], "lr_warmup": 0.0})
+    assert isinstance(fixed.configure_optimizers(), torch.optim.SGD)
+    old = {k: v for k, v in task.hparams.items() if k not in ("lr_milestones", "lr_warmup")} | {"lr_step_epochs": 30}
+    assert SegmentationTask.for_inference(old).hparams.lr_milestones == []  # a checkpoint of an earlier version still loads

@@ -268,8 +268,11 @@ class ModelConfig:
     width: float = setting(positive())  # channel multiplier: 1 is the original network
     lr: float = setting(positive())
     paper_lr: float = setting(positive())  # the paper's rate, which experiment=paper takes
-    lr_step_epochs: int = setting(at_least(0))  # step decay every N epochs (0: fixed learning rate)
+    # The rate times lr_gamma at each milestone, a fraction of the run's SGD iterations (training.task.sgd_with_milestones)
+    lr_milestones: list[float] = setting(each(between(0, 1, low_open=True, high_open=True)))
+    paper_lr_milestones: list[float] = setting(each(between(0, 1, low_open=True, high_open=True)))  # experiment=paper's
     lr_gamma: float = setting(between(0, 1, low_open=True))
+    lr_warmup: float = setting(between(0, 1, high_open=True))  # the rate ramps up from 0 over this fraction of the iterations
     momentum: float = setting(between(0, 1, high_open=True))
     weight_decay: float = setting(at_least(0))
     imagenet_weights: str = MISSING  # torchvision VGG16(-BN) file that pretraining=imagenet reads for this network
@@ -357,6 +360,7 @@ class BootstrapConfig:
 class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
+    seeds: list[int] = setting(each(at_least(0)))  # training seeds of every run: data/runs/<run>/seed<k>
     runs: list[str] = MISSING  # <architecture>-<pretraining>; conf/ takes the grid of the two lists
     runs_dir: str = MISSING  # <run>/predictions from train
     postprocessed_dir: str = MISSING  # <run>/ from postprocess

@@ -59,14 +59,14 @@ def real_row(method: str, predicted: np.ndarray, frames: RealFrames) -> RealRow:
     return RealRow(method, own, other, own - other)
 
 
-def score_real(runs: list[str], runs_dir: Path, frames: RealFrames, prior: np.ndarray, threshold: float) -> dict[str, RealRow]:
-    """Rows keyed by run, then 'mean_path_prior' (prior: (h, w) bool at the training labels' size,
-    stretched to the recording's frame)."""
+def score_real(checkpoints: dict[str, Path], frames: RealFrames, prior: np.ndarray, threshold: float) -> dict[str, RealRow]:
+    """Rows keyed by run (checkpoints: run -> its network), then 'mean_path_prior' (prior: (h, w)
+    bool at the training labels' size, stretched to the recording's frame)."""
     from offroad_path.inference.runners import TorchModel
 
     rows = {}
-    for run in runs:
-        model = TorchModel(runs_dir / run / "checkpoints" / "best.ckpt")
+    for run, checkpoint in checkpoints.items():
+        model = TorchModel(checkpoint)
         confidence = model.predict_all(frames.images)
         rows[run] = real_row(method_title(run), confidence > threshold, frames)
         log.info("%s on %s: IoU %.3f, against other frames' labels %.3f", run, frames.name, rows[run].iou, rows[run].non_corresponding_iou)

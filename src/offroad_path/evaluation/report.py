@@ -34,37 +34,49 @@ class TestSet:
     (a run's maps are loaded once, raw and post-processed): what the sections score."""
 
     runs: list[str]
+    seeds: list[int]  # each run's training seeds; the first one's network runs where a section needs one
     samples: list[Sample]
     labels: np.ndarray  # (N, H, W) bool
     paths: dict[tuple[str, str], list[str]]  # (run, post-processing "no"/"yes") -> its map files, one per sample
-    counts: dict[tuple[str, str], np.ndarray]  # (run, post-processing) -> (N, 4) per-image [tp, fp, tn, fn]
-    predicted: dict[str, np.ndarray]  # run -> (N, H, W) bool: its raw map above the threshold
-    curves: dict[str, dict[str, np.ndarray]]  # run -> precision-recall curve of its raw maps
+    counts: dict[tuple[str, str], np.ndarray]  # (run, post-processing) -> (N, 4) per-image [tp, fp, tn, fn], summed over seeds
+    seed_counts: dict[tuple[str, str], list[np.ndarray]]  # the same per seed
+    predicted: dict[str, np.ndarray]  # run -> (N, H, W) bool: its first seed's raw map above the threshold
+    curves: dict[str, dict[str, np.ndarray]]  # run -> precision-recall curve of its first seed's raw maps
     prior: np.ndarray  # (H, W) bool: the mean training label above the threshold
     threshold: float  # path where confidence > threshold (evaluate.threshold)
 
     @classmethod
     def read(cls, e: DictConfig) -> TestSet:
-        """Every run of evaluate.runs, raw (train) and post-processed; all must list the same samples."""
+        """Every run of evaluate.runs at every seed of evaluate.seeds, raw (train) and post-processed;
+        all must list the same samples."""
         samples: list[Sample] = []
         labels = np.zeros(0)
-        paths, per_image, predicted, curves = {}, {}, {}, {}
+        paths, per_seed, predicted, curves = {}, {}, {}, {}
         for run in e.runs:
-            for pp, manifest, made_by in (("no", Path(e.runs_dir) / run / "predictions" / "manifest.csv", "train"),
-                                          ("yes", Path(e.postprocessed_dir) / run / "manifest.csv", "postprocess")):  # fmt: skip
-                rows = read_predictions_manifest(manifest, made_by)
-                if samples and [s for s, _ in rows] != samples:
-                    raise ValueError(f"{manifest}: lists other test samples than the runs before it (retrain on the same split)")
-                samples, paths[run, pp] = [s for s, _ in rows], [p for _, p in rows]
-                if not len(labels):
-                    labels = load_labels(samples)
-                maps = load_maps(paths[run, pp])
-                per_image[run, pp] = counts(maps, labels, e.threshold)
-                if pp == "no":
-                    predicted[run] = maps > e.threshold
-                    curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
+            for seed in e.seeds:
+                folder = f"{run}/seed{seed}"
+                for pp, manifest, made_by in (("no", Path(e.runs_dir) / folder / "predictions" / "manifest.csv", "train"),
+                                              ("yes", Path(e.postprocessed_dir) / folder / "manifest.csv", "postprocess")):  # fmt: skip
+                    rows = read_predictions_manifest(manifest, made_by)
+                    if samples and [s for s, _ in rows] != samples:
+                        raise ValueError(f"{manifest}: lists other test samples than the runs before it (retrain on the same split)")
+                    samples = [s for s, _ in rows]
+                    if not len(labels):
+                        labels = load_labels(samples)
+                    maps = load_maps([p for _, p in rows])
+                    per_seed.setdefault((run, pp), []).append(counts(maps, labels, e.threshold))
+                    if seed == e.seeds[0]:
+                        paths[run, pp] = [p for _, p in rows]
+                        if pp == "no":
+                            predicted[run] = maps > e.threshold
+                            curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
         prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
-        return cls(list(e.runs), samples, labels, paths, per_image, predicted, curves, prior, e.threshold)
+        summed = {key: np.sum(seeds, axis=0) for key, seeds in per_seed.items()}
+        return cls(list(e.runs), list(e.seeds), samples, labels, paths, summed, per_seed, predicted, curves, prior, e.threshold)
+
+    def checkpoint(self, runs_dir: str | Path, run: str) -> Path:
+        """The network of `run` that sections run on frames of their own (its first seed's)."""
+        return Path(runs_dir) / run / f"seed{self.seeds[0]}" / "checkpoints" / "best.ckpt"
 
     @functools.cached_property
     def prior_counts(self) -> np.ndarray:

@@ -24,6 +24,11 @@ from offroad_path.evaluation.temporal import TemporalRow, score_temporal
 log = logging.getLogger(__name__)
 
 
+def networks(e: DictConfig, test: TestSet) -> dict[str, Path]:
+    """Each run's network for the sections that run it on frames of their own."""
+    return {run: test.checkpoint(e.runs_dir, run) for run in test.runs}
+
+
 def numbers(row) -> dict:
     """A row's numbers for metrics.json, rounded; None for undefined (JSON has no nan)."""
     return {k: (None if v != v else round(v, 6)) for k, v in asdict(row).items() if isinstance(v, float)}
@@ -180,7 +185,7 @@ class Temporal:
         self.rows: dict[str, TemporalRow] | None = None
 
     def score(self, test: TestSet) -> None:
-        self.rows = score_temporal(self.e, self.label, self.block_m, test.runs, test.samples)
+        self.rows = score_temporal(self.e, self.label, self.block_m, networks(self.e, test), test.samples)
 
     def markdown(self) -> str:
         if not self.rows:
@@ -207,7 +212,7 @@ class RealFootage:
     def score(self, test: TestSet) -> None:
         if self.e.real_labels_dir:
             frames = RealFrames.read(Path(self.e.real_labels_dir))
-            self.rows = score_real(test.runs, Path(self.e.runs_dir), frames, test.prior, self.e.threshold)
+            self.rows = score_real(networks(self.e, test), frames, test.prior, self.e.threshold)
 
     def markdown(self) -> str:
         if self.rows is None:

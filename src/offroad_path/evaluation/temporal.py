@@ -117,10 +117,11 @@ def filtered(confidence: np.ndarray, block: Block, alpha: float) -> np.ndarray:
 
 
 def score_temporal(
-    e: DictConfig, label: DictConfig, block_m: float, runs: list[str], samples: list[Sample]
+    e: DictConfig, label: DictConfig, block_m: float, checkpoints: dict[str, Path], samples: list[Sample]
 ) -> dict[str, TemporalRow] | None:
-    """Rows keyed by run; None when evaluate.temporal.enabled is false or the test set is not
-    synthetic. e: conf/evaluate; label: conf/label (exact labels follow its rules); block_m: the split's blocks."""
+    """Rows keyed by run (checkpoints: run -> its network); None when evaluate.temporal.enabled is
+    false or the test set is not synthetic. e: conf/evaluate; label: conf/label (exact labels follow
+    its rules); block_m: the split's blocks."""
     from offroad_path.inference.runners import TorchModel
 
     t = e.temporal
@@ -134,8 +135,8 @@ def score_temporal(
         load_block(block, label)
     labels = np.concatenate([b.labels for b in blocks])
     rows = {}
-    for run in runs:
-        model = TorchModel(Path(e.runs_dir) / run / "checkpoints" / "best.ckpt")
+    for run, checkpoint in checkpoints.items():
+        model = TorchModel(checkpoint)
         raw, fused, steady, steady_fused = [], [], [], []
         for block in blocks:
             confidence = model.predict_all(block.images)

@@ -3,7 +3,13 @@ Segmentation", CVPR 2015.
 
 VGG16 (no batch norm) with fc6/fc7 recast as 7x7 and 1x1 convolutions with dropout; class scores
 from fc7 are upsampled 2x and fused with scores from pool4, again with pool3, then upsampled 8x.
-Upsampling layers start as bilinear interpolation. About 134 M parameters at width 1.
+Upsampling layers start as bilinear interpolation, the class scoring layers at zero (Long et al.,
+section 4.3). About 134 M parameters at width 1.
+
+Initialisation: the 15 convolutions before the scores have no batch norm, and PyTorch's default
+initialisation (variance 1 / (3 fan_in)) shrinks the signal at every layer, so from scratch the
+network often learnt only the class biases (all background; 2 of 3 laptop seeds). The convolutions
+start as He et al. (2015) and torchvision's VGG do: normal, variance 2 / fan_out, biases at zero.
 """
 
 from __future__ import annotations
@@ -40,6 +46,9 @@ class FCN8s(SegmentationNet):
         self.fc6 = nn.Sequential(nn.Conv2d(cin, fc, 7, padding=3), nn.ReLU(inplace=True), nn.Dropout2d(dropout))
         self.fc7 = nn.Sequential(nn.Conv2d(fc, fc, 1), nn.ReLU(inplace=True), nn.Dropout2d(dropout))
         self._channels = (stages[2][-1], stages[3][-1], fc)
+        for conv in [m for m in self.modules() if isinstance(m, nn.Conv2d)]:
+            nn.init.kaiming_normal_(conv.weight, mode="fan_out", nonlinearity="relu")
+            nn.init.zeros_(conv.bias)
         self._build_head(num_classes)
 
     def _build_head(self, num_classes: int) -> None:
@@ -52,6 +61,9 @@ class FCN8s(SegmentationNet):
         self.upscore8 = nn.ConvTranspose2d(num_classes, num_classes, 16, stride=8, padding=4, bias=False)
         for up in (self.upscore2, self.upscore_pool4, self.upscore8):
             up.weight.data.copy_(bilinear_kernel(num_classes, up.kernel_size[0]))
+        for score in (self.score_fr, self.score_pool4, self.score_pool3):
+            nn.init.zeros_(score.weight)
+            nn.init.zeros_(score.bias)
         self.num_classes = num_classes
 
     def forward_padded(self, x: torch.Tensor) -> torch.Tensor:

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import bisect
+
 import lightning as L
 import torch
 import torch.nn.functional as F
@@ -56,7 +58,7 @@ class BaseTask(L.LightningModule):
         self._step(batch, "test")
 
     def configure_optimizers(self):
-        return sgd_with_step_decay(self)
+        return sgd_with_step_decay(self)  # PilotNet (the thesis's schedule, in epochs)
 
 
 class SegmentationTask(BaseTask):
@@ -71,8 +73,9 @@ class SegmentationTask(BaseTask):
         num_classes: int,
         width: float,
         lr: float,
-        lr_step_epochs: int,
+        lr_milestones: list[float],
         lr_gamma: float,
+        lr_warmup: float,
         momentum: float,
         weight_decay: float,
         channels_last: bool,
@@ -84,8 +87,20 @@ class SegmentationTask(BaseTask):
     @classmethod
     def from_config(cls, model: DictConfig, num_classes: int, channels_last: bool) -> SegmentationTask:
         """From a `model` config node (conf/model/<name>.yaml)."""
-        optimiser = {k: model[k] for k in ("lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")}
-        return cls(model=model.name, num_classes=num_classes, width=model.width, **optimiser, channels_last=channels_last)
+        optimiser = {k: model[k] for k in ("lr", "lr_gamma", "lr_warmup", "momentum", "weight_decay")}
+        milestones = [float(f) for f in model.lr_milestones]
+        return cls(model=model.name, num_classes=num_classes, width=model.width, lr_milestones=milestones, **optimiser,
+                   channels_last=channels_last)  # fmt: skip
+
+    @classmethod
+    def for_inference(cls, hp: dict) -> SegmentationTask:
+        """From a checkpoint's hyper-parameters, of this version or an earlier one: the optimiser's
+        settings, which inference does not use, are filled in or left out."""
+        own = {"lr_milestones": [], "lr_gamma": 0.1, "lr_warmup": 0.0} | {k: v for k, v in hp.items() if k != "lr_step_epochs"}
+        return cls(**own)
+
+    def configure_optimizers(self):
+        return sgd_with_milestones(self)
 
     def configure_models(self) -> None:
         self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width)
@@ -124,9 +139,28 @@ class SegmentationTask(BaseTask):
         return loss
 
 
+def sgd_with_milestones(task: L.LightningModule):
+    """SGD with momentum and weight decay (the paper's), the rate ramped linearly from 0 over the
+    first lr_warmup of the run's iterations and multiplied by lr_gamma at each of lr_milestones
+    (fractions of the run's iterations: max_steps when set, else max_epochs x batches per epoch;
+    Lightning's estimated_stepping_batches). The paper says only "a step function" for SegNet: its
+    milestones, like FCN-8s's warm-up, are this project's choice (conf/model/)."""
+    hp = task.hparams
+    optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
+    if not hp.lr_milestones and not hp.lr_warmup:
+        return optimizer
+    total = task.trainer.estimated_stepping_batches
+    warmup, milestones = hp.lr_warmup * total, sorted(round(f * total) for f in hp.lr_milestones)
+
+    def factor(step: int) -> float:
+        return min(1.0, (step + 1) / warmup if warmup else 1.0) * hp.lr_gamma ** bisect.bisect_right(milestones, step)
+
+    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
+    return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
+
+
 def sgd_with_step_decay(task: L.LightningModule):
-    """SGD with momentum and weight decay, the lr multiplied by lr_gamma every lr_step_epochs (0: fixed),
-    from the task's hparams: how the paper trained every network."""
+    """SGD with momentum and weight decay, the lr multiplied by lr_gamma every lr_step_epochs (0: fixed)."""
     hp = task.hparams
     optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
     if hp.lr_step_epochs <= 0:
