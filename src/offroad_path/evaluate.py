@@ -19,7 +19,7 @@ from omegaconf import DictConfig
 from offroad_path.evaluation.report import Section, TestSet, outputs, report_metrics, write_report
 from offroad_path.evaluation.sections import Baselines, ByCondition, RealFootage, ResultsTable, SteeringFromPaths, Temporal
 from offroad_path.evaluation.tables import ResultRow, split_run_name
-from offroad_path.evaluation.uncertainty import Uncertainty
+from offroad_path.evaluation.uncertainty import Uncertainty, test_bootstrap
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.tracking import stage_run, tracking_uri
 
@@ -31,9 +31,10 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
     e = cfg.evaluate
     test = TestSet.read(e)
     results = ResultsTable()
+    bootstrap = test_bootstrap(e, test.samples, cfg.split.block_m)
     # The report, section by section, in the order of results.md and metrics.json.
-    sections: list[Section] = [results, Uncertainty(e, cfg.split.block_m), Baselines(), SteeringFromPaths(e), ByCondition(),
-                               Temporal(e, cfg.label, cfg.split.block_m), RealFootage(e)]  # fmt: skip
+    sections: list[Section] = [results, Uncertainty(bootstrap, cfg.split.block_m), Baselines(), SteeringFromPaths(e, bootstrap),
+                               ByCondition(bootstrap), Temporal(e, cfg.label, cfg.split.block_m), RealFootage(e)]  # fmt: skip
     for section in sections:
         section.score(test)
     write_report(e, test, sections, results.table(), results.figures(test, e.figure_cases, e.figure_scale))

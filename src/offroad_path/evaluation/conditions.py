@@ -6,15 +6,21 @@ cases are shadows, water and forks). Recordings without conditions.csv get no su
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from offroad_path.data.manifest import Sample, parse_boolean
+from offroad_path.evaluation.bootstrap import Interval
+from offroad_path.evaluation.bootstrap import iou as iou_score
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.tables import fmt
 from offroad_path.world.groups import GROUPS
+
+if TYPE_CHECKING:
+    from offroad_path.evaluation.uncertainty import BlockBootstrap
 
 
 def parse_row(row: dict[str, str]) -> dict:
@@ -60,24 +66,43 @@ class ConditionTable:
     titles: list[str]
     frames: list[int]  # test images in each group
     iou: dict[str, list[float]]  # method -> IoU per condition (nan for an empty group)
+    sequences: list[int] = field(default_factory=list)  # test sequences each group's frames come from
+    intervals: dict[str, list[Interval | None]] = field(default_factory=dict)  # method -> per condition; None: < 2 blocks
+
+    def _cell(self, method: str, i: int) -> str:
+        found = self.intervals.get(method, [None] * len(self.keys))[i]
+        return found.text() if found is not None else fmt(self.iou[method][i])
 
     def markdown(self) -> str:
         methods = list(self.iou)
-        lines = ["| condition | test images | " + " | ".join(methods) + " |", "|" + " --- |" * (2 + len(methods))]
+        lines = ["| condition | test images | test sequences | " + " | ".join(methods) + " |", "|" + " --- |" * (3 + len(methods))]
         for i, title in enumerate(self.titles):
-            lines.append(f"| {title} | {self.frames[i]} | " + " | ".join(fmt(self.iou[m][i]) for m in methods) + " |")
+            cells = " | ".join(self._cell(m, i) for m in methods)
+            lines.append(f"| {title} | {self.frames[i]} | {self.sequences[i] if self.sequences else ''} | {cells} |")
         return "\n".join(lines) + "\n"
 
     def metrics(self, method_keys: dict[str, str]) -> dict:
-        """{condition key: {'frames': n, <method key>: IoU or None}} for metrics.json."""
-        return {
-            key: {"frames": self.frames[i]} | {method_keys[m]: (None if v[i] != v[i] else round(v[i], 6)) for m, v in self.iou.items()}
-            for i, key in enumerate(self.keys)
-        }
+        """{condition key: {'frames': n, 'sequences': n, <method key>: IoU or None, <method key>.interval: [low, high]}}."""
+        out = {}
+        for i, key in enumerate(self.keys):
+            row = {"frames": self.frames[i]} | ({"sequences": self.sequences[i]} if self.sequences else {})
+            for m, v in self.iou.items():
+                row[method_keys[m]] = None if v[i] != v[i] else round(v[i], 6)
+                if (found := self.intervals.get(m, [None] * len(self.keys))[i]) is not None:
+                    row[f"{method_keys[m]}.interval"] = [round(found.low, 6), round(found.high, 6)]
+            out[key] = row
+        return out
 
 
-def by_condition(conditions: list[dict], per_image: dict[str, np.ndarray]) -> ConditionTable:
-    """per_image: method -> its (N, 4) per-image counts [tp, fp, tn, fn] over the same samples."""
+def by_condition(conditions: list[dict], per_image: dict[str, np.ndarray], bootstrap: BlockBootstrap | None = None,
+                 sequences: list[str] | None = None) -> ConditionTable:  # fmt: skip
+    """per_image: method -> its (N, 4) per-image counts [tp, fp, tn, fn] over the same samples;
+    bootstrap: intervals over each group's blocks; sequences: each sample's, to count them per group."""
     masks = [np.array([test(row) for row in conditions], bool) for _, _, test in GROUPS]
     iou = {m: [pooled(counts[mask]).iou if mask.any() else float("nan") for mask in masks] for m, counts in per_image.items()}
-    return ConditionTable([k for k, _, _ in GROUPS], [t for _, t, _ in GROUPS], [int(m.sum()) for m in masks], iou)
+    table = ConditionTable([k for k, _, _ in GROUPS], [t for _, t, _ in GROUPS], [int(m.sum()) for m in masks], iou)
+    if sequences is not None:
+        table.sequences = [len({s for s, keep in zip(sequences, mask, strict=True) if keep}) for mask in masks]
+    if bootstrap is not None:
+        table.intervals = {m: [bootstrap.interval(counts, iou_score, mask) for mask in masks] for m, counts in per_image.items()}
+    return table

@@ -105,28 +105,30 @@ class SteeringComparison:
     e: DictConfig  # evaluate's config
     geometry: list[FrameGeometry] | None = None
     rows: dict[str, SteeringRow] = field(default_factory=dict)
+    errors: dict[str, np.ndarray] = field(default_factory=dict)  # key -> per-frame absolute error (normalised)
 
     def start(self, samples: list[Sample], labels: np.ndarray) -> None:
         self.geometry = frame_geometry(samples, Path(self.e.labels_dir))
         if self.geometry is None:
             return
-        self.rows["straight_ahead"] = self._row("always straight ahead", np.zeros(len(samples)))
+        self._row("straight_ahead", "always straight ahead", np.zeros(len(samples)))
         predictions = self.e.steering_from_paths.pilotnet_predictions  # null: no PilotNet row
         pilotnet = pilotnet_predictions(Path(predictions), samples) if predictions else None
         if pilotnet is not None:
-            self.rows["pilotnet"] = self._row("PilotNet (end to end)", pilotnet)
-        self.rows["label_ceiling"] = self._pursued("ground-truth path label + pure pursuit (the ceiling)", labels)
+            self._row("pilotnet", "PilotNet (end to end)", pilotnet)
+        self._pursued("label_ceiling", "ground-truth path label + pure pursuit (the ceiling)", labels)
 
     def add(self, key: str, method: str, paths: np.ndarray) -> None:
         if self.geometry is not None:
-            self.rows[key] = self._pursued(method, paths)
+            self._pursued(key, method, paths)
 
-    def _pursued(self, method: str, paths: np.ndarray) -> SteeringRow:
+    def _pursued(self, key: str, method: str, paths: np.ndarray) -> None:
         angles, no_path = pursued(paths, self.geometry, self.e.steering_from_paths.lookahead_m)
-        return self._row(method, angles, no_path)
+        self._row(key, method, angles, no_path)
 
-    def _row(self, method: str, predicted: np.ndarray, no_path: int = 0) -> SteeringRow:
-        return steering_row(method, predicted, self.geometry, no_path, self.e.steering_from_paths.steering_ratio)
+    def _row(self, key: str, method: str, predicted: np.ndarray, no_path: int = 0) -> None:
+        self.rows[key] = steering_row(method, predicted, self.geometry, no_path, self.e.steering_from_paths.steering_ratio)
+        self.errors[key] = np.abs(predicted - np.array([g.true for g in self.geometry]))
 
     def table(self) -> list[SteeringRow]:
         """Baselines, the networks, the ceiling last."""

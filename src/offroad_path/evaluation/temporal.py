@@ -26,6 +26,7 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import LabelledSequence, read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
+from offroad_path.evaluation.bootstrap import Resampling, block_sums, iou, paired_interval
 from offroad_path.evaluation.metrics import counts, pooled
 from offroad_path.evaluation.tables import method_title
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
@@ -43,6 +44,8 @@ class TemporalRow:
     iou_filtered: float = field(metadata={"title": "IoU, filtered"})
     stability: float
     stability_filtered: float = field(metadata={"title": "stability, filtered"})
+    gain_low: float = field(default=float("nan"), metadata={"title": "filtered - raw IoU, 95 % low"})
+    gain_high: float = field(default=float("nan"), metadata={"title": "filtered - raw IoU, 95 % high"})
 
 
 @dataclass
@@ -117,11 +120,17 @@ def filtered(confidence: np.ndarray, block: Block, alpha: float) -> np.ndarray:
 
 
 def score_temporal(
-    e: DictConfig, label: DictConfig, block_m: float, checkpoints: dict[str, Path], samples: list[Sample]
+    e: DictConfig,
+    label: DictConfig,
+    block_m: float,
+    checkpoints: dict[str, Path],
+    samples: list[Sample],
+    resampling: Resampling | None = None,
 ) -> dict[str, TemporalRow] | None:
     """Rows keyed by run (checkpoints: run -> its network); None when evaluate.temporal.enabled is
     false or the test set is not synthetic. e: conf/evaluate; label: conf/label (exact labels follow
-    its rules); block_m: the split's blocks."""
+    its rules); block_m: the split's blocks. The filter's IoU gain gets a paired block-bootstrap
+    interval (evaluate.bootstrap: the filter's and the raw counts on the same resamples of blocks)."""
     from offroad_path.inference.runners import TorchModel
 
     t = e.temporal
@@ -134,6 +143,8 @@ def score_temporal(
     for block in blocks:
         load_block(block, label)
     labels = np.concatenate([b.labels for b in blocks])
+    frame_blocks = [i for i, b in enumerate(blocks) for _ in b.frames]
+    resampling = Resampling(e.bootstrap.resamples, e.bootstrap.seed, e.bootstrap.level)
     rows = {}
     for run, checkpoint in checkpoints.items():
         model = TorchModel(checkpoint)
@@ -145,9 +156,12 @@ def score_temporal(
             fused.append(smooth)
             steady += stability(confidence > e.threshold, block)
             steady_fused += stability(smooth > e.threshold, block)
+        raw_counts, fused_counts = counts(np.concatenate(raw), labels, e.threshold), counts(np.concatenate(fused), labels, e.threshold)
+        gain = (paired_interval(block_sums(fused_counts, frame_blocks), block_sums(raw_counts, frame_blocks), iou, resampling)
+                if len(blocks) >= 2 else None)  # fmt: skip
         rows[run] = TemporalRow(
-            method_title(run), len(labels), pooled(counts(np.concatenate(raw), labels, e.threshold)).iou,
-            pooled(counts(np.concatenate(fused), labels, e.threshold)).iou, float(np.mean(steady)), float(np.mean(steady_fused)),
+            method_title(run), len(labels), pooled(raw_counts).iou, pooled(fused_counts).iou, float(np.mean(steady)),
+            float(np.mean(steady_fused)), *((gain.low, gain.high) if gain is not None else ()),
         )  # fmt: skip
         log.info("%s on every test-block frame: IoU %.3f (filtered %.3f), stability %.3f (filtered %.3f)", run, *(
             getattr(rows[run], k) for k in ("iou", "iou_filtered", "stability", "stability_filtered")))  # fmt: skip

@@ -6,6 +6,8 @@ stated as "no difference measured"."""
 
 from __future__ import annotations
 
+from collections.abc import Hashable
+from dataclasses import dataclass
 from itertools import combinations
 from pathlib import Path
 
@@ -15,7 +17,7 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
-from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, iou, paired_interval
+from offroad_path.evaluation.bootstrap import SCORES, Interval, Resampling, Score, block_sums, interval, iou, paired_interval
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.tables import method_title, split_run_name
@@ -26,6 +28,35 @@ def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> li
     label run's poses // block_m); a mirrored copy is in its frame's block."""
     travelled = {run.name: run.distance() for run in read_label_run(labels_dir)}
     return [block_of(s.sequence, travelled[s.sequence][s.f0], block_m) for s in samples]
+
+
+@dataclass
+class BlockBootstrap:
+    """The test set's blocks of driving (one label per item) and how to resample them: intervals on
+    any per-item statistic, over all items or a subset (a condition group: only its blocks)."""
+
+    blocks: list[Hashable]
+    resampling: Resampling
+
+    def _sums(self, per_item: np.ndarray, mask: np.ndarray | None) -> np.ndarray | None:
+        keep = np.ones(len(self.blocks), bool) if mask is None else mask
+        blocks = [b for b, k in zip(self.blocks, keep, strict=True) if k]
+        return block_sums(np.asarray(per_item)[keep], blocks) if len(set(blocks)) >= 2 else None
+
+    def interval(self, per_item: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Interval | None:
+        """None with fewer than 2 blocks to resample."""
+        sums = self._sums(per_item, mask)
+        return None if sums is None else interval(sums, score, self.resampling)
+
+    def paired(self, a: np.ndarray, b: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Interval | None:
+        sums_a, sums_b = self._sums(a, mask), self._sums(b, mask)
+        return None if sums_a is None else paired_interval(sums_a, sums_b, score, self.resampling)
+
+
+def test_bootstrap(e: DictConfig, samples: list[Sample], block_m: float) -> BlockBootstrap:
+    """The block bootstrap of the test samples (evaluate.bootstrap; block_m: the split's)."""
+    b = e.bootstrap
+    return BlockBootstrap(sample_blocks(samples, Path(e.labels_dir), block_m), Resampling(b.resamples, b.seed, b.level))
 
 
 Side = tuple[str, str]  # a run and its post-processing ("no" / "yes")
@@ -50,30 +81,29 @@ def comparisons(runs: list[str]) -> list[tuple[str, str, Side, Side]]:
 class Uncertainty:
     """95 % block-bootstrap intervals (evaluate.bootstrap) on every run's IoU and on the comparisons."""
 
-    def __init__(self, e: DictConfig, block_m: float) -> None:
-        self.e, self.block_m = e, block_m
-        self.resampling = Resampling(e.bootstrap.resamples, e.bootstrap.seed, e.bootstrap.level)
-        self.blocks = 0
+    def __init__(self, bootstrap: BlockBootstrap, block_m: float) -> None:
+        self.bootstrap, self.block_m = bootstrap, block_m
+        self.resampling = bootstrap.resampling
+        self.blocks = len(set(bootstrap.blocks))
         self.seeds: list[int] = []
         self.intervals: dict[tuple[str, str], Interval] = {}
+        self.others: dict[tuple[str, str], dict[str, Interval]] = {}  # precision, recall, accuracy
         self.over_seeds: dict[tuple[str, str], tuple[float, float]] = {}  # (mean, sample sd) of the seeds' IoU, with several
         self.differences: list[tuple[str, str, Interval]] = []  # (metrics key, title, a - b)
 
     def score(self, test: TestSet) -> None:
         self.seeds = test.seeds
-        blocks = sample_blocks(test.samples, Path(self.e.labels_dir), self.block_m)
-        self.blocks = len(set(blocks))
         if self.blocks < 2:  # nothing to resample: the section says so
             return
         if len(test.seeds) > 1:
             for key, per_seed in test.seed_counts.items():
                 ious = [pooled(c).iou for c in per_seed]
                 self.over_seeds[key] = (float(np.mean(ious)), float(np.std(ious, ddof=1)))
-        sums = {key: block_sums(counts, blocks) for key, counts in test.counts.items()}
-        self.intervals = {key: interval(s, iou, self.resampling) for key, s in sums.items()}
-        self.differences = [
-            (key, title, paired_interval(sums[a], sums[b], iou, self.resampling)) for key, title, a, b in comparisons(test.runs)
-        ]
+        b = self.bootstrap
+        self.intervals = {key: b.interval(counts, iou) for key, counts in test.counts.items()}
+        self.others = {key: {name: b.interval(counts, SCORES[name]) for name in ("precision", "recall", "accuracy")}
+                       for key, counts in test.counts.items()}  # fmt: skip
+        self.differences = [(key, title, b.paired(test.counts[x], test.counts[y], iou)) for key, title, x, y in comparisons(test.runs)]
 
     def markdown(self) -> str:
         r = self.resampling
@@ -89,11 +119,18 @@ class Uncertainty:
         columns = ["IoU, raw [95 % interval]", "IoU, post-processed [95 % interval]"]
         if self.over_seeds:
             lines.append(f"Each method's counts are pooled over its {len(self.seeds)} training seeds ({', '.join(map(str, self.seeds))}), "
-                         "and a comparison pairs them seed by seed on each resample; beside each interval, the mean and sample "
-                         "standard deviation of the seeds' own IoU.\n")  # fmt: skip
+                         "and a comparison scores both methods' seed-pooled counts on the same resamples; beside each interval, "
+                         "the mean and sample standard deviation of the seeds' own IoU.\n")  # fmt: skip
             columns = [columns[0], "raw, over seeds", columns[1], "post-processed, over seeds"]
         lines += ["| method | " + " | ".join(columns) + " |", "|" + " --- |" * (1 + len(columns))]
         lines += [f"| {method_title(run)} | " + " | ".join(self._cells(run, pp) for pp in POSTPROCESSING) + " |" for run in runs]
+        lines += [
+            "",
+            "| method (raw) | accuracy [95 % interval] | precision [95 % interval] | recall [95 % interval] |",
+            "| --- | --- | --- | --- |",
+        ]
+        others = ("accuracy", "precision", "recall")
+        lines += [f"| {method_title(run)} | " + " | ".join(self.others[run, "no"][name].text() for name in others) + " |" for run in runs]
         lines += ["", "| comparison (IoU, a - b) | difference [95 % interval] |", "| --- | --- |"]
         lines += [f"| {title} | {difference.difference_text()} |" for _, title, difference in self.differences]
         return "\n".join(lines) + "\n"
@@ -110,6 +147,8 @@ class Uncertainty:
             return {name: round(i.estimate, 6), "low": round(i.low, 6), "high": round(i.high, 6)}
 
         intervals = {f"{run}.{PP_KEY[pp]}": entry(i, "iou") for (run, pp), i in self.intervals.items()}
+        for (run, pp), others in self.others.items():
+            intervals[f"{run}.{PP_KEY[pp]}"] |= {name: entry(i, "estimate") for name, i in others.items()}
         for (run, pp), (mean, sd) in self.over_seeds.items():
             intervals[f"{run}.{PP_KEY[pp]}"] |= {"seed_mean": round(mean, 6), "seed_sd": round(sd, 6)}
         differences = {key: entry(i, "iou_difference") for key, _, i in self.differences}
