@@ -120,12 +120,7 @@ def filtered(confidence: np.ndarray, block: Block, alpha: float) -> np.ndarray:
 
 
 def score_temporal(
-    e: DictConfig,
-    label: DictConfig,
-    block_m: float,
-    checkpoints: dict[str, Path],
-    samples: list[Sample],
-    resampling: Resampling | None = None,
+    e: DictConfig, label: DictConfig, block_m: float, checkpoints: dict[str, Path], samples: list[Sample]
 ) -> dict[str, TemporalRow] | None:
     """Rows keyed by run (checkpoints: run -> its network); None when evaluate.temporal.enabled is
     false or the test set is not synthetic. e: conf/evaluate; label: conf/label (exact labels follow
