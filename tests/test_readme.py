@@ -1,0 +1,39 @@
+"""The README's results are generated from metrics/: the committed README agrees with the committed
+metrics, and a README with one number changed is caught."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from offroad_path.evaluation.readme import BEGIN, END, generated, main, with_results
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_the_readme_results_are_the_committed_metrics():
+    assert main(["--check", "--readme", str(ROOT / "README.md"), "--metrics", str(ROOT / "metrics")]) == 0
+
+
+def test_a_readme_with_one_number_changed_fails_the_check(tmp_path, capsys):
+    readme = (ROOT / "README.md").read_text()
+    block = readme.split(BEGIN)[1].split(END)[0]
+    number = re.search(r"\| (\d\.\d{3}) \[", block)  # the first IoU of the results table
+    assert number is not None
+    changed = f"{float(number.group(1)) + 0.001:.3f}"
+    edited = readme.replace(block, block.replace(number.group(0), f"| {changed} [", 1))
+    assert edited != readme
+    (tmp_path / "README.md").write_text(edited)
+    assert main(["--check", "--readme", str(tmp_path / "README.md"), "--metrics", str(ROOT / "metrics")]) == 1
+    assert "README.md: its results disagree with" in capsys.readouterr().err
+    assert main(["--readme", str(tmp_path / "README.md"), "--metrics", str(ROOT / "metrics")]) == 0  # regenerated
+    assert (tmp_path / "README.md").read_text() == readme
+
+
+def test_the_block_needs_both_markers():
+    with pytest.raises(ValueError, match=r"README\.md: needs one"):
+        with_results("# no markers\n", "text")
+    assert with_results(f"a\n{BEGIN}\nold\n{END}\nb\n", "new\n") == f"a\n{BEGIN}\n\nnew\n\n{END}\nb\n"
+    assert "| SegNet | none | no |" in generated(ROOT / "metrics")
