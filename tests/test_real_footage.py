@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from offroad_path.evaluation.bootstrap import Resampling
 from offroad_path.evaluation.metrics import counts, per_image_iou, pooled
-from offroad_path.evaluation.real import RealFrames, score_real
+from offroad_path.evaluation.real import RealFrames, score_real, separability
 from offroad_path.label import label
 
 KITTI_FOOTPRINT = ("label.footprint.width_m=1.8", "label.footprint.front_m=2.0", "label.footprint.rear_m=-2.7",
@@ -30,7 +31,7 @@ def test_a_network_and_the_prior_on_the_real_snippet(kitti_labels, trained, tmp_
     assert n >= 5 and (h, w) == (370, 1226) and len(frames.images) == n  # the snippet's own frame size
     prior = np.zeros((288, 512), bool)
     prior[144:, 128:384] = True  # the bottom half's middle, at the synthetic label size
-    rows = score_real({"unet-none": checkpoint}, frames, prior, 0.5)
+    rows = score_real({"unet-none": checkpoint}, frames, prior, 0.5, Resampling(1000, 0))
     assert list(rows) == ["unet-none", "mean_path_prior"]
     # The prior stretched to 1226 x 370 (nearest neighbour) covers rows from 144 * 370 / 288 = 185 and
     # columns from 128 * 1226 / 512 = 306.5 to 384 * 1226 / 512 = 919.5.
@@ -45,3 +46,46 @@ def test_a_network_and_the_prior_on_the_real_snippet(kitti_labels, trained, tmp_
     net = rows["unet-none"]
     assert 0 <= net.iou <= 1 and 0 <= net.non_corresponding_iou <= 1
     assert net.perception == pytest.approx(net.iou - net.non_corresponding_iou)
+    # The snippet's labels (a gentle road) look alike: a perfect predictor could gain 1 - diversity at most.
+    s = separability(frames, rows)
+    assert 0.9 < s.diversity < 1 and s.largest_gain == pytest.approx(1 - s.diversity)
+
+
+def hand_frames(labels: list[list[int]], direction: list[int], blocks: list[int]) -> RealFrames:
+    n = len(labels)
+    return RealFrames("hand", [np.zeros((1, 4, 3), np.uint8)] * n, np.array(labels, bool)[:, None, :],
+                      [("s", i) for i in range(n)], [("s", b) for b in blocks], direction)  # fmt: skip
+
+
+def test_diversity_gain_and_the_shuffled_control_by_hand():
+    from offroad_path.evaluation.bootstrap import Resampling
+    from offroad_path.evaluation.real import real_row, separability
+
+    frames = hand_frames([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 1], [0, 1, 1, 0]], direction=[-1, -1, 1, 0], blocks=[0, 0, 1, 1])
+    perfect = real_row("perfect", frames.labels, frames, Resampling(1000, 0))
+    # Pairs of different frames: IoU 1, 0, 1/3, 0, 1/3, 1/3; of different bend directions: 0, 1/3, 0, 1/3, 1/3.
+    assert (perfect.iou, perfect.non_corresponding_iou, perfect.other_direction_iou) == pytest.approx((1.0, 1 / 3, 1 / 5))
+    # Per-frame gains 5/9, 5/9, 8/9, 6/9 in blocks {0, 1} and {2, 3}: resamples of two blocks give 5/9, 2/3 or 7/9.
+    assert (perfect.perception_low, perfect.perception_high) == pytest.approx((5 / 9, 7 / 9))
+    constant = real_row("prior", np.broadcast_to(frames.labels[0], frames.labels.shape), frames, Resampling(1000, 0))
+    # A painted prior ([1, 1, 0, 0] on every frame) matches labels bending another way as well as its own:
+    # ordered pairs of other directions 0, 1/3, 0, 1/3, 1, 1, 1/3, 1, 1, 0; per-frame gains 5/9, 5/9, -7/9, -1/3.
+    assert constant.other_direction_iou == pytest.approx(0.5) and constant.other_direction_iou >= constant.iou == pytest.approx(5 / 11)
+    assert (constant.perception_low, constant.perception_high) == pytest.approx((-5 / 9, 5 / 9))  # blocks: +5/9, -5/9 or 0
+    # The prior's IoU over blocks {0, 1} (tp, fp, fn: 4, 0, 0) and {2, 3} (1, 3, 3): 1, 5/11 or 1/7.
+    assert (constant.iou_low, constant.iou_high) == pytest.approx((1 / 7, 1.0))
+    s = separability(frames, {"perfect": perfect, "mean_path_prior": constant})
+    assert (s.diversity, s.largest_gain, s.width) == pytest.approx((1 / 3, 2 / 3, 6 / 7)) and not s.separable
+    assert "cannot separate perception from a prior" in s.sentence()
+    wide = hand_frames([[1, 1, 0, 0], [0, 0, 1, 1], [1, 1, 0, 0], [0, 0, 1, 1]], direction=[-1, 1, -1, 1], blocks=[0, 0, 1, 1])
+    rows = {name: real_row(name, m, wide, Resampling(1000, 0)) for name, m in (("perfect", wide.labels),
+            ("mean_path_prior", np.broadcast_to(wide.labels[0], wide.labels.shape)))}  # fmt: skip
+    opposite = separability(wide, rows)  # labels 0 or 1 alike; the prior scores 0.5 in every block
+    assert (opposite.diversity, opposite.width) == pytest.approx((1 / 3, 0.0)) and opposite.separable
+    assert rows["perfect"].other_direction_iou == 0 and rows["mean_path_prior"].other_direction_iou == pytest.approx(0.5)
+    assert "The recording can separate perception from a prior." in opposite.sentence()
+    same = hand_frames([[1, 1, 0, 0]] * 4, direction=[0, 0, 0, 0], blocks=[0, 0, 1, 1])
+    row = real_row("perfect", same.labels, same, Resampling(1000, 0))
+    alike = separability(same, {"perfect": row})
+    assert alike.largest_gain == 0 and np.isnan(row.other_direction_iou) and not alike.separable
+    assert "cannot separate perception from a prior" in alike.sentence()

@@ -34,7 +34,8 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
     bootstrap = test_bootstrap(e, test.samples, cfg.split.block_m)
     # The report, section by section, in the order of results.md and metrics.json.
     sections: list[Section] = [results, Uncertainty(bootstrap, cfg.split.block_m), Baselines(), SteeringFromPaths(e, bootstrap),
-                               ByCondition(bootstrap), Temporal(e, cfg.label, cfg.split.block_m), RealFootage(e)]  # fmt: skip
+                               ByCondition(bootstrap), Temporal(e, cfg.label, cfg.split.block_m),
+                               RealFootage(e, bootstrap, cfg.split.block_m, cfg.label.distance_m)]  # fmt: skip
     for section in sections:
         section.score(test)
     write_report(e, test, sections, results.table(), results.figures(test, e.figure_cases, e.figure_scale))

@@ -2,7 +2,16 @@
 stage's VO labels of e.g. the KITTI snippet), beside two numbers that need no perception: the
 same predictions against the labels of the recording's other frames (the non-corresponding
 baseline) and the mean path of the synthetic training labels. A network that perceives the
-path beats both; one that paints its prior scores the same against any frame's label."""
+path beats both; one that paints its prior scores the same against any frame's label.
+
+Whether a recording can show perception at all: when its labels all look alike (a straight road),
+even a perfect predictor gains little over the other frames' labels. The label diversity (mean IoU
+between the labels of different frames) bounds that gain at 1 - diversity. How precisely the
+recording measures an IoU: the widest 95 % block-bootstrap interval of an IoU in its table (the
+networks' and the mean-path prior's). When the largest gain is below that width, the recording
+cannot separate perception from a prior, and the report says so. The shuffled control scores each
+prediction also against the labels of frames that bend the other way (left, straight, right from
+the labels' poses), which a painted prior cannot match."""
 
 from __future__ import annotations
 
@@ -12,9 +21,12 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import torch
 
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.loading import read
+from offroad_path.data.splitting import block_of
+from offroad_path.evaluation.bootstrap import Resampling, block_sums, interval, iou, mean
 from offroad_path.evaluation.metrics import counts, non_corresponding, pooled
 from offroad_path.evaluation.tables import method_title
 
@@ -25,8 +37,13 @@ log = logging.getLogger(__name__)
 class RealRow:
     method: str
     iou: float = field(metadata={"title": "IoU against its own frame's label"})
+    iou_low: float = field(metadata={"title": "IoU, 95 % low"})
+    iou_high: float = field(metadata={"title": "IoU, 95 % high"})
     non_corresponding_iou: float = field(metadata={"title": "IoU against other frames' labels"})
+    other_direction_iou: float = field(metadata={"title": "against labels bending another way"})
     perception: float = field(metadata={"title": "difference (perception)"})
+    perception_low: float = field(default=float("nan"), metadata={"title": "per-frame gain, 95 % low"})
+    perception_high: float = field(default=float("nan"), metadata={"title": "per-frame gain, 95 % high"})
 
 
 @dataclass
@@ -37,29 +54,113 @@ class RealFrames:
     images: list[np.ndarray]
     labels: np.ndarray
     groups: list[tuple[str, int]]  # (sequence, f0) of each frame
+    blocks: list[tuple[str, int]] = field(default_factory=list)  # each frame's block of driving
+    direction: list[int] = field(default_factory=list)  # -1 left, 0 straight, 1 right over the label's drive
 
     @classmethod
-    def read(cls, labels_dir: Path) -> RealFrames:
-        images, labels, groups = [], [], []
+    def read(cls, labels_dir: Path, block_m: float = 20.0, distance_m: float = 20.0) -> RealFrames:
+        """block_m: the blocks the bootstrap resamples; distance_m: how far ahead the direction is read."""
+        images, labels, groups, blocks, direction = [], [], [], [], []
         for run in read_label_run(labels_dir):
+            travelled = run.distance()
             for path in run.labels():
                 f0 = int(path.stem)
                 images.append(cv2.cvtColor(read(str(run.sequence.left[f0]), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB))
                 labels.append(read(str(path), cv2.IMREAD_GRAYSCALE) > 0)
                 groups.append((run.name, f0))
+                blocks.append(block_of(run.name, travelled[f0], block_m))
+                ahead = min(int(np.searchsorted(travelled, travelled[f0] + distance_m)), len(travelled) - 1)
+                direction.append(bend_direction(run.poses[f0], run.poses[ahead]))
         if len(labels) < 2:
             raise ValueError(f"{labels_dir}: holds {len(labels)} labelled frame(s); real-footage rows need at least 2")
-        return cls(labels_dir.name, images, np.stack(labels), groups)
+        return cls(labels_dir.name, images, np.stack(labels), groups, blocks, direction)
 
 
-def real_row(method: str, predicted: np.ndarray, frames: RealFrames) -> RealRow:
-    """predicted: (N, H, W) bool paths on the frames."""
+STRAIGHT_DEG = 5.0  # a heading change smaller than this over the label's drive: straight
+
+
+def bend_direction(start: np.ndarray, end: np.ndarray) -> int:
+    """-1 left, 0 straight, 1 right: the heading change from camera pose `start` to `end` (4x4,
+    camera to world; x right, y down, z forward), about the camera's vertical axis."""
+    forward = (np.linalg.inv(start) @ end)[:3, 2]  # end's viewing direction in start's frame
+    yaw = np.degrees(np.arctan2(forward[0], forward[2]))
+    return 0 if abs(yaw) < STRAIGHT_DEG else int(np.sign(yaw))
+
+
+def iou_matrix(predicted: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(N, N) IoU of prediction i against label j; 1 where both are empty. predicted, target: (N, H, W) bool."""
+    P = torch.from_numpy(np.ascontiguousarray(predicted)).flatten(1).double()
+    T = torch.from_numpy(np.ascontiguousarray(target)).flatten(1).double()
+    tp = P @ T.T
+    union = P.sum(1, keepdim=True) + T.sum(1)[None, :] - tp
+    return torch.where(union > 0, tp / union.clamp(min=1), torch.ones_like(tp)).numpy()
+
+
+@dataclass(frozen=True)
+class Separability:
+    """Whether the recording can show perception: diversity of its labels, the largest gain any
+    predictor could show over the other frames' labels, and the narrowest interval a network's
+    measured gain got."""
+
+    diversity: float  # mean IoU between labels of different frames
+    largest_gain: float  # 1 - diversity: a perfect predictor's gain
+    width: float  # of the widest 95 % interval of an IoU on the recording
+    resampled: str  # what the bootstrap resampled
+
+    @property
+    def separable(self) -> bool:
+        return bool(self.largest_gain > self.width)
+
+    def sentence(self) -> str:
+        head = (f"Label diversity (mean IoU between different frames' labels): {self.diversity:.3f}; the largest gain a perfect "
+                f"predictor could show over the other frames' labels: {self.largest_gain:.3f}; the widest 95 % interval of an IoU "
+                f"below ({self.resampled}) is {self.width:.3f} wide.")  # fmt: skip
+        if self.separable:
+            return head + " The recording can separate perception from a prior."
+        return head + " **This recording cannot separate perception from a prior**: no result below says whether a network perceives."
+
+
+def real_row(method: str, predicted: np.ndarray, frames: RealFrames, resampling: Resampling | None = None) -> RealRow:
+    """predicted: (N, H, W) bool paths on the frames. The per-frame gain (own IoU minus the mean
+    over other frames' labels) gets a block-bootstrap interval with `resampling`."""
     own = pooled(counts(predicted.astype(np.float32), frames.labels)).iou
     other = non_corresponding(predicted, frames.labels, frames.groups).iou
-    return RealRow(method, own, other, own - other)
+    matrix = iou_matrix(predicted, frames.labels)
+    others = _different(frames.groups)
+    direction = np.array(frames.direction)
+    turned = others & (direction[:, None] != direction[None, :])
+    other_direction = float(matrix[turned].mean()) if turned.any() else float("nan")
+    bounds = [float("nan")] * 4
+    if resampling is not None:
+        gain = np.diag(matrix) - np.nanmean(np.where(others, matrix, np.nan), axis=1)
+        blocks = frames.blocks if len(set(frames.blocks)) >= 2 else frames.groups
+        found = interval(block_sums(counts(predicted.astype(np.float32), frames.labels), blocks), iou, resampling)
+        gained = interval(block_sums(np.stack([gain, np.ones_like(gain)], 1), blocks), mean, resampling)
+        bounds = [found.low, found.high, gained.low, gained.high]
+    return RealRow(method, own, *bounds[:2], other, other_direction, own - other, *bounds[2:])
 
 
-def score_real(checkpoints: dict[str, Path], frames: RealFrames, prior: np.ndarray, threshold: float) -> dict[str, RealRow]:
+def _different(groups: list) -> np.ndarray:
+    """(N, N): pairs of images of different frames (a frame and its mirrored copy are one)."""
+    codes = {g: i for i, g in enumerate(dict.fromkeys(groups))}
+    g = np.array([codes[x] for x in groups])
+    return g[:, None] != g[None, :]
+
+
+def separability(frames: RealFrames, rows: dict[str, RealRow]) -> Separability:
+    """The recording's label diversity against how precisely it measures an IoU: the widest 95 %
+    interval of an IoU among `rows` (score_real's, with intervals)."""
+    matrix = iou_matrix(frames.labels, frames.labels)
+    diversity = float(matrix[_different(frames.groups)].mean())
+    widths = [r.iou_high - r.iou_low for r in rows.values() if r.iou_low == r.iou_low]
+    blocks = len(set(frames.blocks))
+    resampled = f"{blocks} blocks" if blocks >= 2 else "single frames: too short for blocks, which understates it"
+    return Separability(diversity, 1.0 - diversity, max(widths) if widths else float("nan"), resampled)
+
+
+def score_real(
+    checkpoints: dict[str, Path], frames: RealFrames, prior: np.ndarray, threshold: float, resampling: Resampling | None = None
+) -> dict[str, RealRow]:
     """Rows keyed by run (checkpoints: run -> its network), then 'mean_path_prior' (prior: (h, w)
     bool at the training labels' size, stretched to the recording's frame)."""
     from offroad_path.inference.runners import TorchModel
@@ -68,10 +169,10 @@ def score_real(checkpoints: dict[str, Path], frames: RealFrames, prior: np.ndarr
     for run, checkpoint in checkpoints.items():
         model = TorchModel(checkpoint)
         confidence = model.predict_all(frames.images)
-        rows[run] = real_row(method_title(run), confidence > threshold, frames)
+        rows[run] = real_row(method_title(run), confidence > threshold, frames, resampling)
         log.info("%s on %s: IoU %.3f, against other frames' labels %.3f", run, frames.name, rows[run].iou, rows[run].non_corresponding_iou)
     h, w = frames.labels.shape[1:]
     stretched = cv2.resize(prior.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
     everywhere = np.broadcast_to(stretched, frames.labels.shape)
-    rows["mean_path_prior"] = real_row("mean path prior (synthetic training labels)", everywhere, frames)
+    rows["mean_path_prior"] = real_row("mean path prior (synthetic training labels)", everywhere, frames, resampling)
     return rows

@@ -16,7 +16,7 @@ from offroad_path.evaluation.bootstrap import Interval, mean
 from offroad_path.evaluation.conditions import ConditionTable, by_condition, read_conditions
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases
 from offroad_path.evaluation.metrics import Scores, non_corresponding, per_image_iou, pooled
-from offroad_path.evaluation.real import RealFrames, RealRow, score_real
+from offroad_path.evaluation.real import RealFrames, RealRow, Separability, score_real, separability
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, markdown_table, method_title, network_name, split_run_name
@@ -234,14 +234,16 @@ class Temporal:
 class RealFootage:
     """Every run on a labelled real recording (evaluate.real_labels_dir; none by default)."""
 
-    def __init__(self, e: DictConfig) -> None:
-        self.e = e
+    def __init__(self, e: DictConfig, bootstrap: BlockBootstrap, block_m: float, distance_m: float) -> None:
+        self.e, self.resampling, self.block_m, self.distance_m = e, bootstrap.resampling, block_m, distance_m
         self.rows: dict[str, RealRow] | None = None
+        self.separability: Separability | None = None
 
     def score(self, test: TestSet) -> None:
         if self.e.real_labels_dir:
-            frames = RealFrames.read(Path(self.e.real_labels_dir))
-            self.rows = score_real(networks(self.e, test), frames, test.prior, self.e.threshold)
+            frames = RealFrames.read(Path(self.e.real_labels_dir), self.block_m, self.distance_m)
+            self.rows = score_real(networks(self.e, test), frames, test.prior, self.e.threshold, self.resampling)
+            self.separability = separability(frames, self.rows)
 
     def markdown(self) -> str:
         if self.rows is None:
@@ -250,9 +252,18 @@ class RealFootage:
             f"\n## Real footage ({Path(self.e.real_labels_dir).name})\n\nEach network, trained on the synthetic world, run on the "
             "labelled frames of a real recording (VO labels) and scored against each frame's own label and, averaged over pairs, "
             "against the other frames' labels. A network that perceives the path scores higher on its own frame; one that paints a "
-            "fixed prior scores about the same on both, like the mean path of the synthetic training labels.\n\n"
+            "fixed prior scores about the same on both, like the mean path of the synthetic training labels; against the labels "
+            "of frames that bend another way (the shuffled control) it cannot do better than against its own.\n\n"
+            + self.separability.sentence()
+            + "\n\n"
             + markdown_table(list(self.rows.values()))
         )
 
     def metrics(self) -> dict:
-        return {"real_footage": {key: numbers(row) for key, row in self.rows.items()}} if self.rows is not None else {}
+        if self.rows is None:
+            return {}
+        s = self.separability
+        recording = {"label_diversity": round(s.diversity, 6), "largest_gain": round(s.largest_gain, 6),
+                     "widest_iou_interval": None if s.width != s.width else round(s.width, 6),
+                     "separable": s.separable}  # fmt: skip
+        return {"real_footage": {"recording": recording} | {key: numbers(row) for key, row in self.rows.items()}}
