@@ -2,7 +2,7 @@
 
     python benchmarks/postprocess_speed.py [--run unet-none] [--repeats 5]
 
-Post-processes a run's real test-set maps (data/runs/<run>/predictions, written by `dvc repro`)
+Post-processes a run's real test-set maps (data/runs/<run>/seed0/predictions, written by `dvc repro`)
 with their stereo depth, as the postprocess stage does, and prints the best and median time per
 map over the repeats, with OpenCV on one thread and on its default thread count, with the exact
 blur (blur_scale 1) and with the default half-resolution one; and how far the second moves the

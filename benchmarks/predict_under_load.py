@@ -46,7 +46,7 @@ def main() -> None:
         onnx = Path(tmp) / f"{args.run}.onnx"
         subprocess.run([sys.executable, "-m", "offroad_path.export", f"model={model}", f"pretraining={args.run.split('-', 1)[1]}",
                         f"export.out={onnx}", "mlflow.enabled=false"], check=True, capture_output=True)  # fmt: skip
-        checkpoints = {"onnxruntime": onnx, "PyTorch": Path("data") / "runs" / args.run / "checkpoints" / "best.ckpt"}
+        checkpoints = {"onnxruntime": onnx, "PyTorch": Path("data") / "runs" / args.run / "seed0" / "checkpoints" / "best.ckpt"}
         print("| machine | runtime | predict.threads | threads used | end to end, frames/s | in the model, frames/s |")
         print("| --- | --- | --- | --- | --- | --- |")
         for load in ("idle", "beside a busy torch process"):

@@ -7,7 +7,7 @@ process start-up and imports of a training stage; PNG decoding of the training i
 alone; the training loader's first epoch (decoding into the cache) and a later one (from the
 cache: augmentation, resizing, collation); forward and backward
 passes on batches already in memory; the validation pass; one MLflow sample image; and the
-number of epochs the laptop preset ran (from data/runs/<model>-none/metrics.json when present).
+number of epochs the laptop preset ran (from data/runs/<model>-none/seed0/metrics.json when present).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def main() -> None:
             log_image, _ = timed(lambda: mlflow.log_image(image, "samples/epoch_000.png"))
 
     epochs = None
-    metrics = Path("data/runs") / f"{args.model}-none" / "metrics.json"
+    metrics = Path("data/runs") / f"{args.model}-none" / "seed0" / "metrics.json"
     if metrics.is_file():
         epochs = json.loads(metrics.read_text()).get("epochs")
     total = load + step + validate + log_image

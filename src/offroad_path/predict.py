@@ -1,8 +1,8 @@
 """Run a trained path model on new footage: a folder of images, a stereo sequence, or a video.
 
-    python -m offroad_path.predict predict.checkpoint=data/runs/unet-none/checkpoints/best.ckpt predict.input=drive.mp4
+    python -m offroad_path.predict predict.checkpoint=data/runs/unet-none/seed0/checkpoints/best.ckpt predict.input=drive.mp4
     python -m offroad_path.predict predict.run_id=<MLflow training run> predict.input=data/synthetic/seq_001 predict.postprocess=true
-    python -m offroad_path.predict predict.checkpoint=data/runs/segnet-none/model.onnx predict.input=images/
+    python -m offroad_path.predict predict.checkpoint=data/runs/segnet-none/seed0/model.onnx predict.input=images/
 
 Writes predict.out_dir: confidence/NAME.png (path confidence, 0-255), overlay/NAME.png (the
 path, C > predict.threshold, tinted over the image) and, for a video or a sequence, overlay.mp4.

@@ -4,7 +4,7 @@ and write the test-set confidence maps for post-processing (see docs/design.md).
     python -m offroad_path.train model=segnet pretraining=segmentation
     python -m offroad_path.train -m model=segnet,fcn,unet pretraining=none,segmentation
 
-Writes train.out_dir (data/runs/<model>-<pretraining>): checkpoints/best.ckpt, metrics.json,
+Writes train.out_dir (data/runs/<model>-<pretraining>/seed<k>): checkpoints/best.ckpt, metrics.json,
 predictions/ (float16 .npy per test sample and manifest.csv); logs to MLflow. Resumable state lives
 beside it in data/runs/.resume/ (see offroad_path.training.run.fit).
 """
