@@ -15,6 +15,7 @@ import pytest
 from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import prediction_name, read_manifest, read_predictions_manifest, write_predictions_manifest
 from offroad_path.evaluate import evaluate
+from offroad_path.evaluation.metrics import counts, pooled
 from offroad_path.evaluation.uncertainty import sample_blocks
 from offroad_path.postprocess import run_postprocess
 
@@ -33,23 +34,29 @@ def stage_config(compose_config, split_dir: Path, root: Path, *overrides: str):
     )  # fmt: skip
 
 
+def write_run(compose_config, split_dir: Path, root: Path, run: str, seed: int, maps: np.ndarray) -> None:
+    """What train and postprocess write for `run` at `seed`, with `maps` as its predictions."""
+    samples = read_manifest(split_dir / "test.csv")
+    out = root / "runs" / run / f"seed{seed}" / "predictions"
+    rows = []
+    for sample, m in zip(samples, maps, strict=True):
+        (out / sample.sequence).mkdir(parents=True, exist_ok=True)
+        np.save(out / prediction_name(sample), m.astype(np.float16))
+        rows.append((sample, str(out / prediction_name(sample))))
+    write_predictions_manifest(out / "manifest.csv", rows)
+    model, pretraining = run.split("-")
+    post = root / "post" / run / f"seed{seed}"
+    run_postprocess(stage_config(compose_config, split_dir, root, f"model={model}", f"pretraining={pretraining}",
+                                 f"postprocess.predictions_dir={out}", f"postprocess.out_dir={post}"))  # fmt: skip
+
+
 @pytest.fixture
 def scored(compose_config, split_dir, tmp_path):
     samples = read_manifest(split_dir / "test.csv")
     labels = load_labels(samples).astype(np.float32)
     made = {"unet-none": labels, "fcn-none": 0.9 * np.roll(labels, SHIFT_PX, axis=2)}
     for run, maps in made.items():
-        out = tmp_path / "runs" / run / "seed0" / "predictions"
-        rows = []
-        for sample, m in zip(samples, maps, strict=True):
-            (out / sample.sequence).mkdir(parents=True, exist_ok=True)
-            np.save(out / prediction_name(sample), m.astype(np.float16))
-            rows.append((sample, str(out / prediction_name(sample))))
-        write_predictions_manifest(out / "manifest.csv", rows)
-        model, pretraining = run.split("-")
-        post = tmp_path / "post" / run / "seed0"
-        run_postprocess(stage_config(compose_config, split_dir, tmp_path, f"model={model}", f"pretraining={pretraining}",
-                                     f"postprocess.predictions_dir={out}", f"postprocess.out_dir={post}"))  # fmt: skip
+        write_run(compose_config, split_dir, tmp_path, run, 0, maps)
     write_pilotnet_predictions(samples, tmp_path / "steering" / "predictions.csv")
     rows = evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]"))
     return rows, labels.astype(bool), made
@@ -92,9 +99,23 @@ def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path
     labels_dir = Path(read_manifest(split_dir / "test.csv")[0].label).parents[2]
     blocks = sample_blocks(read_manifest(split_dir / "test.csv"), labels_dir, 1.0)
     assert found["test_set"]["blocks"] == len(set(blocks)) >= 2
-    assert found["unet-none.raw"] == {"iou": 1.0, "low": 1.0, "high": 1.0}  # perfect on every resample
+    perfect = {"estimate": 1.0, "low": 1.0, "high": 1.0}
+    assert found["unet-none.raw"] == {"iou": 1.0, "low": 1.0, "high": 1.0} | dict.fromkeys(("precision", "recall", "accuracy"), perfect)
     shifted = found["fcn-none.raw"]
     assert shifted["low"] <= shifted["iou"] <= shifted["high"] and shifted["iou"] == pytest.approx(rows[2].iou, abs=1e-6)
+    for name, value in (("precision", rows[2].precision), ("recall", rows[2].recall), ("accuracy", rows[2].accuracy)):
+        assert shifted[name]["low"] <= shifted[name]["estimate"] <= shifted[name]["high"]
+        assert shifted[name]["estimate"] == pytest.approx(value, abs=1e-6)
+    # Steering: the perfect maps steer as the label does; paired against PilotNet on the same frames.
+    steering = json.loads((tmp_path / "metrics.json").read_text())["steering_from_paths"]
+    against = steering["unet-none_vs_pilotnet"]
+    assert against["mae_difference"] == pytest.approx(steering["unet-none"]["mae"] - steering["pilotnet"]["mae"], abs=1e-5)
+    assert against["low"] <= against["mae_difference"] <= against["high"]
+    # By condition: an interval beside every group with frames in at least two blocks, around its IoU.
+    groups = json.loads((tmp_path / "metrics.json").read_text())["by_condition"]
+    assert groups["all"]["sequences"] == 1 and groups["all"]["unet-none.interval"] == [1.0, 1.0]
+    low, high = groups["all"]["fcn-none.interval"]
+    assert low <= groups["all"]["fcn-none"] <= high
     # The perfect maps beat the shifted ones in every block: the paired interval lies above 0.
     difference = found["unet-none_vs_fcn-none"]
     assert difference["iou_difference"] == pytest.approx(1 - rows[2].iou, abs=1e-6) and difference["low"] > 0
@@ -133,7 +154,15 @@ def test_outputs_follow_the_contract(scored, tmp_path):
 
 def test_steering_from_paths_against_pilotnet(scored, split_dir, tmp_path):
     steering = json.loads((tmp_path / "metrics.json").read_text())["steering_from_paths"]
-    assert list(steering) == ["straight_ahead", "pilotnet", "label_ceiling", "unet-none", "fcn-none"]
+    assert list(steering) == [
+        "straight_ahead",
+        "pilotnet",
+        "label_ceiling",
+        "unet-none",
+        "fcn-none",
+        "unet-none_vs_pilotnet",
+        "fcn-none_vs_pilotnet",
+    ]
     true = true_steering(read_manifest(split_dir / "test.csv"))
     assert steering["straight_ahead"]["mae"] == pytest.approx(np.abs(true).mean(), abs=1e-6)
     assert steering["pilotnet"]["mae"] == pytest.approx(0.1, abs=1e-5)
@@ -154,3 +183,24 @@ def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path
     manifest = tmp_path / "runs" / "segnet-none" / "seed0" / "predictions" / "manifest.csv"
     assert run.stderr.strip().splitlines()[-1] == f"error: {manifest}: manifest is missing (run the train stage first)"
     assert not any(tmp_path.iterdir())
+
+
+def test_several_seeds_pool_their_counts_and_show_their_spread(compose_config, split_dir, tmp_path):
+    samples = read_manifest(split_dir / "test.csv")
+    labels = load_labels(samples)
+    seeds = {0: np.roll(labels, SHIFT_PX, axis=2), 1: np.roll(labels, 2 * SHIFT_PX, axis=2)}  # fcn: two seeds, two shifts
+    for seed, maps in seeds.items():
+        write_run(compose_config, split_dir, tmp_path, "unet-none", seed, labels.astype(np.float32))
+        write_run(compose_config, split_dir, tmp_path, "fcn-none", seed, maps.astype(np.float32))
+    write_pilotnet_predictions(samples, tmp_path / "steering" / "predictions.csv")
+    evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]", "evaluate.seeds=[0,1]",
+                          "mlflow.enabled=false"))  # fmt: skip
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    per_seed = [pooled(counts(maps.astype(np.float32), labels)) for maps in seeds.values()]
+    summed = pooled(np.sum([counts(maps.astype(np.float32), labels) for maps in seeds.values()], axis=0))
+    assert metrics["fcn-none"]["raw"]["iou"] == pytest.approx(summed.iou, abs=1e-6)  # counts pooled over the seeds
+    fcn = metrics["uncertainty"]["fcn-none.raw"]
+    ious = [s.iou for s in per_seed]
+    assert (fcn["seed_mean"], fcn["seed_sd"]) == pytest.approx((np.mean(ious), np.std(ious, ddof=1)), abs=1e-6)
+    assert metrics["uncertainty"]["unet-none.raw"]["seed_sd"] == 0 and metrics["uncertainty"]["test_set"]["seeds"] == 2
+    assert "| IoU, raw [95 % interval] | raw, over seeds |" in (tmp_path / "evaluation" / "results.md").read_text()

@@ -59,14 +59,26 @@ def training_runs(cfg: DictConfig) -> dict[str, str]:
     return found
 
 
+def flat(metrics: dict, prefix: str = "") -> dict[str, float]:
+    """metrics.json's nested numbers as MLflow metric names (a.b.c; list items a.b.0; True as 1)."""
+    out: dict[str, float] = {}
+    items = metrics.items() if isinstance(metrics, dict) else enumerate(metrics)
+    for key, value in items:
+        name = f"{prefix}{key}"
+        if isinstance(value, dict | list):
+            out |= flat(value, f"{name}.")
+        elif value is not None:
+            out[name] = float(value)
+    return out
+
+
 def log_to_mlflow(cfg: DictConfig, sections: list[Section], table: list[ResultRow]) -> None:
     with stage_run(cfg, "evaluate") as run:
         if run is None:
             return
         import mlflow
 
-        for name, scores in report_metrics(sections).items():  # <run>.raw.iou, baselines.mean_path_prior.iou, ...
-            mlflow.log_metrics({f"{name}.{part}.{k}": v for part, row in scores.items() for k, v in row.items() if v is not None})
+        mlflow.log_metrics(flat(report_metrics(sections)))  # <run>.raw.iou, baselines.mean_path_prior.iou, ...
         linked = training_runs(cfg)
         mlflow.set_tags({f"training_run.{name}": run_id for name, run_id in linked.items()})
         mlflow.log_table({k: [getattr(r, k) for r in table] for k in asdict(table[0])}, artifact_file="results.json")
