@@ -5,13 +5,14 @@ trained on each and scored on the held-out test worlds' exact labels.
     python benchmarks/label_noise.py [--drifts 0.5 1.7 3.4 8.5] [--out docs/images/label_noise.png]
 
 Needs a finished `dvc repro` (data/synthetic, and data/labels for the windowed VO's poses). The
-variants: the true poses; the pipeline's windowed VO (data/labels/<seq>/poses_vo.txt); the
-frame-to-frame VO (a label run with label.odometry.method=frame_to_frame); the true poses with a
-smooth random-walk error in step length and heading (offroad_path.odometry.perturb) set by each
---drifts value (which makes a drift of about 0.6 times it; the table gives the drift measured). Only the training drives get the variant's poses; the test worlds are labelled
-from their true poses in every variant, so every network is scored against the same exact labels.
-Each variant: the label stage (label.poses.source=file), the split stage, the train stage, then the
-test IoU the evaluate stage's way (pooled at 0.5). Prints a Markdown table and writes a figure.
+variants: the true poses; the pipeline's windowed VO (data/labels/<seq>/poses_vo.txt); the frame-to-
+frame VO (a label run with label.odometry.method=frame_to_frame); the true poses with a smooth
+random-walk error in step length and heading (offroad_path.odometry.perturb) set by each --drifts
+value (which makes a drift of about 0.6 times it; the table gives the drift measured). Only the
+training drives get the variant's poses; the test worlds are labelled from their true poses in every
+variant, so every network is scored against the same exact labels. Each variant: the label stage
+(label.poses.source=file), the split stage, the train stage, then the test IoU the evaluate stage's
+way (pooled at 0.5). Prints a Markdown table and writes a figure.
 """
 
 from __future__ import annotations
