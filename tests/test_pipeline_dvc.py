@@ -54,7 +54,8 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
         assert scores[run] == all_scores[run]
         assert scores["steering_from_paths"][run] == all_scores["steering_from_paths"][run]
     assert scores["baselines"] == {key: all_scores["baselines"][key] for key in scores["baselines"]}  # those of its runs
-    assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2
+    worlds = json.loads((repo_copy / "data" / "synthetic" / "summary.json").read_text())["test_worlds"]
+    assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2 + len(worlds) and worlds  # two drives, held-out test worlds
     assert json.loads((repo_copy / "metrics" / "label.json").read_text())["labels"] > 0
     for model in MODELS:
         for pretraining in ("none", "segmentation"):

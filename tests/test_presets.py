@@ -42,6 +42,7 @@ def test_full_preset_is_the_paper_size_with_the_projects_fixes(compose_config):
         assert paper[key.split(".")[0]][key.split(".")[1]] == full[key.split(".")[0]][key.split(".")[1]], key
     assert (full.split.strategy, full.split.val_fraction, full.label.occlusion.enabled, full.data.augment) == ("grouped", 0.1, True, True)
     assert full.train.max_steps == -1 and full.callbacks.early_stopping.patience > 0
+    assert full.synthesize.test_worlds.min_blocks == 30  # held-out test worlds, as the laptop default
 
 
 def full_size_on_cpu(tmp_path, split_dir) -> list[str]:

@@ -95,7 +95,7 @@ class TestWorldsConfig:
     min_blocks: int = setting(at_least(0))  # 0: no test worlds (the split takes test blocks from the drives)
     per_condition: int = setting(at_least(0))  # test worlds that must show each condition group
     block_m: float = setting(positive())
-    horizon_m: float = setting(positive())  # the last metres of a drive, which get no label
+    horizon_m: float = MISSING  # the last metres of a drive, which get no label (label.distance_m, whose rule checks it)
     max_candidates: int = setting(at_least(1))
 
 
