@@ -69,8 +69,10 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     assert all(0 <= metrics[r][pp]["accuracy"] <= 1 for r in metrics if "raw" in metrics[r] for pp in ("raw", "postprocessed"))
     # path against steering: PilotNet (train_steering ran before evaluate), every run, the ceiling
     runs = {r for r in metrics if "raw" in metrics[r]}
-    assert set(metrics["steering_from_paths"]) == runs | {"straight_ahead", "pilotnet", "label_ceiling"}
-    assert set(metrics["by_condition"]["all"]) == runs | {"frames", "mean_path_prior"}
+    paired = {f"{r}_vs_pilotnet" for r in runs}  # each with its paired interval
+    assert set(metrics["steering_from_paths"]) == runs | paired | {"straight_ahead", "pilotnet", "label_ceiling"}
+    scored = runs | {"mean_path_prior"}
+    assert set(metrics["by_condition"]["all"]) == scored | {f"{r}.interval" for r in scored} | {"frames", "sequences"}
     assert len((repo_copy / "data" / "evaluation" / "results.csv").read_text().splitlines()) == 1 + 12
     assert len(list((repo_copy / "metrics" / "precision_recall").glob("*.csv"))) == 6
     assert {p.name for p in (repo_copy / "data" / "evaluation" / "figures").iterdir()} == {"good_and_bad_cases.png", "postprocessing.png"}
