@@ -93,13 +93,13 @@ def main() -> None:
             }
         print("| labels from | translation drift over 20 m (%) | heading drift (deg/m) | training labels against exact (IoU) "
               "| U-Net test IoU (exact test labels) | seconds |\n| --- | --- | --- | --- | --- | --- |", flush=True)  # fmt: skip
-        exact = tmp / "true poses" / "labels"
+        exact = tmp / "true_poses" / "labels"
         for title, estimated in variants.items():
             start = time.perf_counter()
-            folder = tmp / title
+            folder = tmp / "".join(c if c.isalnum() else "_" for c in title)
             poses = {name: true[name] for name in recordings} | estimated
             pattern = write_poses(folder / "poses", poses)
-            run("offroad_path.label", "label.poses.source=file", f"label.poses.file={pattern}", f"label.out_dir={folder / 'labels'}",
+            run("offroad_path.label", "label.poses.source=file", f"label.poses.file='{pattern}'", f"label.out_dir={folder / 'labels'}",
                 f"label.metrics_path={folder / 'label.json'}", "mlflow.enabled=false")  # fmt: skip
             run("offroad_path.split", f"split.labels_dir={folder / 'labels'}", f"split.out_dir={folder / 'split'}")
             run("offroad_path.train", "model=unet", "pretraining=none", "seed=0", f"data.split_dir={folder / 'split'}",
