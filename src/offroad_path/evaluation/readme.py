@@ -38,8 +38,9 @@ def _f(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.3f}"
 
 
-def results_markdown(evaluation: dict, label: dict, steering: dict) -> str:
-    """The results section's body (between the markers) from the three metrics files."""
+def results_markdown(evaluation: dict, label: dict, steering: dict, resamples: int) -> str:
+    """The results section's body (between the markers) from the three metrics files; resamples:
+    evaluate.bootstrap.resamples of the run that wrote them."""
     u = evaluation.get("uncertainty", {})
     runs = [key for key, value in evaluation.items() if isinstance(value, dict) and "raw" in value]
     blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
@@ -53,7 +54,7 @@ def results_markdown(evaluation: dict, label: dict, steering: dict) -> str:
         f"{label['rotation_drift_deg_per_m']:.4f} deg/m. Test set: {everything.get('frames', 'n/a')} images (frames and their mirrored "
         f"copies) from {everything.get('sequences', 'n/a')} held-out test sequences, {blocks} blocks of 20 m of driving; "
         f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % block bootstrap over those blocks "
-        "(1000 resamples); they cover which stretches of driving were tested"
+        f"({resamples} resamples); they cover which stretches of driving were tested"
         + (", not which seed trained the network." if seeds == 1 else ", with each method's counts pooled over its seeds.")
         + " Beside the paper's Table 5.1 (its private data, full-size networks on a GPU, ImageNet pretraining; ours: the "
         "world's 8 classes).\n",
@@ -164,7 +165,10 @@ def with_results(readme: str, block: str, path: Path = Path("README.md")) -> str
 
 def generated(metrics_dir: Path) -> str:
     read = {name: json.loads((metrics_dir / f"{name}.json").read_text()) for name in ("evaluation", "label", "steering")}
-    return results_markdown(read["evaluation"], read["label"], read["steering"])
+    from offroad_path.config import load_config
+
+    resamples = load_config().evaluate.bootstrap.resamples  # the committed run's: dvc.lock tracks conf/evaluate
+    return results_markdown(read["evaluation"], read["label"], read["steering"], resamples)
 
 
 def main(argv: list[str] | None = None) -> int:
