@@ -215,6 +215,11 @@ class OdometryConfig:
     stereo_depth_m: float = setting(positive())  # beyond it, the right image's sigma grows as (z / this)^2
     max_skipped_frames: int = setting(at_least(0))
     fallback_feature_factor: int = setting(at_least(1))
+    # The rig's disparity offset, estimated in the bundle adjustment: its prior's sigma at a
+    # sequence's start (0: not estimated), and the estimate beyond which the stage warns.
+    disparity_offset_sigma_px: float = setting(at_least(0))
+    disparity_offset_every: int = setting(at_least(1))  # windows: every n-th one estimates it, the rest use it
+    disparity_offset_warn_px: float = setting(positive())
 
 
 @dataclass

@@ -58,6 +58,17 @@ def drift_metrics(drifts: list[dict]) -> dict[str, float]:
     }
 
 
+def offset_metrics(summaries: list[dict]) -> dict[str, float]:
+    """The rig offsets the odometry estimated: the mean over sequences and the largest in size."""
+    metrics = {}
+    for what in ("disparity", "row"):
+        offsets = [s[f"vo_{what}_offset_px"] for s in summaries if s.get(f"vo_{what}_offset_px") is not None]
+        if offsets:
+            metrics[f"vo_{what}_offset_px_mean"] = float(np.mean(offsets))
+            metrics[f"vo_{what}_offset_px_largest"] = float(max(offsets, key=abs))
+    return metrics
+
+
 def outputs(cfg: DictConfig) -> Outputs:
     c = cfg.label
     return Outputs("label", folders={"label.out_dir": c.out_dir}, files={"label.metrics_path": c.metrics_path}, inputs=[c.in_dir])
@@ -88,6 +99,7 @@ def label(cfg: DictConfig) -> dict:
                 metrics[f"vo_{name}"] = sum(s["vo_fallbacks"][name] for s in summaries if "vo_fallbacks" in s)
         if drifts:
             metrics |= drift_metrics(drifts)
+        metrics |= offset_metrics(summaries)
         if not metrics["labels"]:
             raise ValueError(
                 f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"])

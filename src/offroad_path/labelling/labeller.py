@@ -123,7 +123,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         "warnings": [],
     }
     if run is not None:
-        summary |= write_odometry(out_dir, run, seq, cfg.distance_m)
+        summary |= write_odometry(out_dir, run, seq, cfg.distance_m, cfg.odometry.disparity_offset_warn_px)
     if not reports:
         summary["warnings"].append(
             f"no label: the {'estimated ' if run is not None else ''}path ({travelled[-1]:.1f} m over {len(seq)} frames) never gets "
@@ -151,11 +151,12 @@ def odometry_holds(run: OdometryRun, report: SegmentReport) -> bool:
     return not failed
 
 
-def write_odometry(out_dir: Path, run: OdometryRun, seq: Sequence, segment_m: float) -> dict:
-    """poses_vo.txt, steps.csv (every step, with the fallback that made it) and, when the sequence
-    has its own poses, drift.csv (every scored segment); the summary's VO figures."""
+def write_odometry(out_dir: Path, run: OdometryRun, seq: Sequence, segment_m: float, warn_offset_px: float) -> dict:
+    """poses_vo.txt, steps.csv (every step, with the fallback that made it and the disparity offset
+    estimated after it) and, when the sequence has its own poses, drift.csv (every scored segment);
+    the summary's VO figures, with a warning when the rig's estimated offsets pass warn_offset_px."""
     (out_dir / "poses_vo.txt").write_text(poses_to_text(run.poses))
-    columns = ["from", "to", "ok", "keyframe", "features", "tracked", "inliers", "fallback", "reason"]
+    columns = ["from", "to", "ok", "keyframe", "features", "tracked", "inliers", "fallback", "reason", "disparity_offset_px"]
     rows = [{"from": k, "to": k + 1, **{c: getattr(s, c) for c in columns[2:]}} for k, s in enumerate(run.steps)]
     _write_csv(out_dir / "steps.csv", rows, columns)
     fallbacks = Counter(s.fallback for s in run.steps if s.fallback)
@@ -163,9 +164,17 @@ def write_odometry(out_dir: Path, run: OdometryRun, seq: Sequence, segment_m: fl
         "vo_failed_steps": int(run.failed.sum()),
         "vo_pieces": len(run.pieces),
         "vo_fallbacks": {name: fallbacks.get(name, 0) for name in FALLBACKS},
+        "vo_disparity_offset_px": run.disparity_offset_px,
+        "vo_row_offset_px": run.row_offset_px,
         "drift": None,
         "warnings": [],
     }
+    for what, offset in (("disparity", run.disparity_offset_px), ("row", run.row_offset_px)):
+        if offset is not None and abs(offset) > warn_offset_px:
+            found["warnings"].append(
+                f"the odometry estimated a {what} offset of {offset:+.2f} px between the rectified images "
+                f"(beyond label.odometry.disparity_offset_warn_px = {warn_offset_px:g}): the rig needs recalibrating"
+            )
     if seq.poses is not None:
         result, problem = drift(run.poses, seq.poses, segment_m, run.pieces)
         if problem:

@@ -15,12 +15,20 @@ class FrontEnd:
 
     def __init__(self, calibration: StereoCalibration, cfg: OdometryConfig):
         self.cfg = cfg
-        self.K = calibration.K
         self.fx, self.fy = calibration.K[0, 0], calibration.K[1, 1]
         self.cx, self.cy = calibration.K[0, 2], calibration.K[1, 2]
         self.baseline = calibration.baseline_m
+        # The rig's rectification residuals, when an estimator knows them: observed minus true
+        # disparity, and right-image rows below the left's. They move the right camera's principal
+        # point to (cx - disparity_offset, cy + row_offset).
+        self.disparity_offset, self.row_offset = 0.0, 0.0
         criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
         self.lk = {"winSize": (cfg.lk_window, cfg.lk_window), "maxLevel": cfg.lk_levels, "criteria": criteria}
+
+    @property
+    def K(self) -> np.ndarray:
+        """The left camera's intrinsic matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     def corners(self, image: np.ndarray, max_features: int, quality: float, taken: np.ndarray | None = None) -> np.ndarray:
         """The strongest corners of each image bucket, so that features cover the whole view.
@@ -86,7 +94,7 @@ class FrontEnd:
 
     def triangulate(self, pts_l: np.ndarray, pts_r: np.ndarray) -> np.ndarray:
         """(N, 3) points in the left camera's frame from stereo pairs."""
-        z = self.fx * self.baseline / (pts_l[:, 0] - pts_r[:, 0]).astype(np.float64)
+        z = self.fx * self.baseline / (pts_l[:, 0] - pts_r[:, 0] - self.disparity_offset).astype(np.float64)
         return np.stack([(pts_l[:, 0] - self.cx) * z / self.fx, (pts_l[:, 1] - self.cy) * z / self.fy, z], axis=1)
 
     def project(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -95,7 +103,7 @@ class FrontEnd:
         u = self.fx * xyz[:, 0] / z + self.cx
         v = self.fy * xyz[:, 1] / z + self.cy
         left = np.stack([u, v], axis=1).astype(np.float32)
-        right = np.stack([u - self.fx * self.baseline / z, v], axis=1).astype(np.float32)
+        right = np.stack([u - self.fx * self.baseline / z - self.disparity_offset, v + self.row_offset], axis=1).astype(np.float32)
         return left, right
 
     def pnp(self, xyz: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:

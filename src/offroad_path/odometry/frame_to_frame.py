@@ -69,6 +69,10 @@ class FrameToFrameOdometry:
         """(N, 4, 4) camera-to-first-camera poses and the N-1 steps between them."""
         return np.array(self._poses), self._steps
 
+    def rig_offsets(self) -> tuple[None, None]:
+        """This estimator takes the rig's rectification as given."""
+        return None, None
+
     def _frame(self, left: np.ndarray, right: np.ndarray) -> _Frame:
         corners = self.front.corners(left, self.cfg.max_features, self.cfg.corner_quality)
         matched, good = self.front.stereo_match(left, right, corners)

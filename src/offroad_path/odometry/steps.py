@@ -26,3 +26,4 @@ class StepResult:
     reason: str = ""  # why the step failed
     fallback: str = ""  # the fallback that made the step: more_features, wide_search, skipped_frame
     keyframe: bool = False  # frame k+1 joined the windowed estimator's keyframes
+    disparity_offset_px: float = float("nan")  # the windowed estimator's estimate after adjusting keyframe k+1

@@ -22,6 +22,8 @@ log = logging.getLogger(__name__)
 class OdometryRun:
     poses: np.ndarray  # (N, 4, 4) camera to first camera; across a failed step only a guess
     steps: list[StepResult]  # steps[k] is the motion from frame k to k+1
+    disparity_offset_px: float | None = None  # the rig's, as the estimator found it; None: not estimated
+    row_offset_px: float | None = None
 
     @property
     def failed(self) -> np.ndarray:
@@ -46,7 +48,7 @@ def run_odometry(sequence: Sequence, cfg: OdometryConfig) -> OdometryRun:
     vo.start(sequence.load_left(0, grey=True), sequence.load_right(0, grey=True))
     for k in range(1, len(sequence)):
         vo.step(sequence.load_left(k, grey=True), sequence.load_right(k, grey=True))
-    run = OdometryRun(*vo.finish())
+    run = OdometryRun(*vo.finish(), *vo.rig_offsets())
     for k, s in enumerate(run.steps):
         if not s.ok:
             log.warning("%s: odometry failed from frame %d to %d: %s", sequence.name, k, k + 1, s.reason)

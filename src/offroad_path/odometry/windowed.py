@@ -7,11 +7,15 @@ window of the last `window` keyframes, whose poses and landmarks are refined tog
 Levenberg-Marquardt in GTSAM on left and right reprojections (`GenericStereoFactor3D`, Huber loss),
 in the spirit of ORB-SLAM2's local bundle adjustment and SOFT's careful feature handling.
 
-Why far points are down-weighted: a stereo match's disparity carries a small constant bias on real
-images (0.2 px on the KITTI snippet, see docs/odometry.md); depth error grows as z^2 / (f B), so far
-points pull the translation long. Their right-image residual's sigma grows as (z / stereo_depth_m)^2
-beyond `stereo_depth_m`: far points still fix rotation (their left reprojections are untouched),
-near points fix scale.
+The rig's disparity offset: a real rig's rectified images disagree by a fraction of a pixel (about
+-0.2 px of disparity on the KITTI snippet, docs/odometry.md), and depth error grows as z^2 / (f B),
+so far points pull the translation long. Every `disparity_offset_every`-th window estimates the
+offset (and the rows' misalignment) as the principal point of a right camera with a calibration of
+its own, under a prior that starts at 0 and narrows as windows accumulate; the other windows and
+the front end correct every disparity by the estimate. What the estimate leaves, the far points'
+down-weighting takes: in those windows, a right-image residual's sigma grows as
+(z / stereo_depth_m)^2 beyond `stereo_depth_m`, so far points still fix rotation (their left
+reprojections are untouched) and near points fix scale.
 
 A weak step is retried with more features, then with a wider search, then skipped (the next frame
 is matched to the last good one and the skipped pose interpolated); only then does the step fail,
@@ -25,6 +29,7 @@ from dataclasses import dataclass
 import cv2
 import gtsam
 import numpy as np
+from gtsam_unstable import ProjectionFactorPPPCCal3_S2
 
 from offroad_path.config import OdometryConfig
 from offroad_path.odometry.features import FrontEnd
@@ -60,6 +65,7 @@ class _Step:
     reason: str = ""
     fallback: str = ""
     keyframe: bool = False
+    disparity_offset_px: float = float("nan")
 
 
 class WindowedOdometry:
@@ -69,7 +75,10 @@ class WindowedOdometry:
         self.cfg = cfg
         self.front = FrontEnd(calibration, cfg)
         f = self.front
-        self._calibration = gtsam.Cal3_S2Stereo(f.fx, f.fy, 0.0, f.cx, f.cy, f.baseline)
+        self._left = gtsam.Cal3_S2(f.fx, f.fy, 0.0, f.cx, f.cy)
+        self._stereo = gtsam.Cal3_S2Stereo(f.fx, f.fy, 0.0, f.cx, f.cy, f.baseline)
+        self._windows = 0  # windows adjusted so far
+        self._calibrations = 0  # of them, those that estimated the offsets
         self._points = np.zeros((1024, 3))  # landmark positions in the world (first camera) frame
         self._n_points = 0  # rows of _points in use; the array doubles when full
         self._poses: list[np.ndarray | None] = []  # camera-to-world per frame; None while skipped
@@ -78,7 +87,7 @@ class WindowedOdometry:
         self._window: list[_Keyframe] = []
         self._velocity = np.eye(4)  # the last motion from one frame to the next (camera k to k+1)
         self._ref: _Reference | None = None
-        self._noise: dict[int, gtsam.noiseModel.Base] = {}
+        self._noise: dict[tuple[int, int], gtsam.noiseModel.Base] = {}
 
     # --- the per-frame loop -------------------------------------------------------------------
 
@@ -124,10 +133,18 @@ class WindowedOdometry:
             self._poses[k] = self._poses[keyframe] @ relative
         poses = np.array(self._poses)
         steps = [
-            StepResult(s.ok, np.linalg.inv(poses[k + 1]) @ poses[k], s.features, s.tracked, s.inliers, s.reason, s.fallback, s.keyframe)
+            StepResult(s.ok, np.linalg.inv(poses[k + 1]) @ poses[k], s.features, s.tracked, s.inliers, s.reason, s.fallback,
+                       s.keyframe, s.disparity_offset_px)
             for k, s in enumerate(self._steps)
-        ]
+        ]  # fmt: skip
         return poses, steps
+
+    def rig_offsets(self) -> tuple[float | None, float | None]:
+        """(disparity offset, row offset) in pixels as the last window estimated them; (None, None)
+        with label.odometry.disparity_offset_sigma_px = 0 (not estimated)."""
+        if self.cfg.disparity_offset_sigma_px == 0:
+            return None, None
+        return self.front.disparity_offset, self.front.row_offset
 
     # --- locating a frame ---------------------------------------------------------------------
 
@@ -241,17 +258,28 @@ class WindowedOdometry:
 
     def _adjust(self) -> None:
         """Levenberg-Marquardt over the window's poses and the landmarks seen at least twice in it;
-        the oldest keyframe's pose is held fixed."""
+        the oldest keyframe's pose is held fixed. Every `disparity_offset_every`-th window also
+        estimates the rig's offsets (`_calibrating_graph`); the others take them as known."""
         if len(self._window) < 2:
             return
         landmarks, count = np.unique(np.concatenate([kf.ids for kf in self._window]), return_counts=True)
         shared = landmarks[count >= 2]
         if not len(shared):
             return
-        graph, values = self._window_graph(shared)
+        cfg = self.cfg
+        calibrating = cfg.disparity_offset_sigma_px > 0 and self._windows % cfg.disparity_offset_every == 0
+        self._windows += 1
+        graph, values = self._calibrating_graph(shared) if calibrating else self._stereo_graph(shared)
         params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(self.cfg.window_iterations)
+        params.setMaxIterations(cfg.window_iterations)
         params.setLinearSolverType("SEQUENTIAL_CHOLESKY")  # 3x faster here than the multifrontal default
+        if calibrating:  # landmarks first, the variables every observation shares last: a small reduced system
+            ordering = gtsam.Ordering()
+            for key in [*(gtsam.symbol("l", i) for i in shared.tolist()), *(gtsam.symbol("x", kf.frame) for kf in self._window)]:
+                ordering.push_back(key)
+            ordering.push_back(_RIGHT_OF_LEFT)
+            ordering.push_back(_RIGHT_CALIBRATION)
+            params.setOrdering(ordering)
         try:
             result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
         except RuntimeError:  # an indeterminate system (too few shared landmarks): keep the PnP poses
@@ -260,24 +288,72 @@ class WindowedOdometry:
             self._poses[kf.frame] = result.atPose3(gtsam.symbol("x", kf.frame)).matrix()
         for i in shared.tolist():
             self._points[i] = result.atPoint3(gtsam.symbol("l", i))
+        if calibrating:
+            f, right = self.front, result.atCal3_S2(_RIGHT_CALIBRATION)
+            f.disparity_offset, f.row_offset = f.cx - right.px(), right.py() - f.cy
+            self._calibrations += 1
+        if cfg.disparity_offset_sigma_px > 0:
+            self._steps[self._window[-1].frame - 1].disparity_offset_px = self.front.disparity_offset
 
-    def _window_graph(self, shared: np.ndarray) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
-        """Stereo reprojection factors of the window's observations of `shared` landmarks, and the
-        current poses and positions as the starting point."""
-        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        for i, kf in enumerate(self._window):
-            key, pose = gtsam.symbol("x", kf.frame), gtsam.Pose3(self._poses[kf.frame])
-            values.insert(key, pose)
-            if i == 0:
-                graph.add(gtsam.NonlinearEqualityPose3(key, pose))
-            levels = self._noise_levels(np.maximum(kf.uv_l[:, 0] - kf.uv_r[:, 0], 1e-3))
+    def _stereo_graph(self, shared: np.ndarray) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+        """Stereo reprojection factors of the window's observations of `shared` landmarks, with the
+        rig's offsets taken as known, and the current poses and positions as the starting point."""
+        graph, values = gtsam.NonlinearFactorGraph(), self._window_values(shared)
+        f = self.front
+        self._add_fixed_pose(graph)
+        for kf in self._window:
+            key = gtsam.symbol("x", kf.frame)
+            levels = self._noise_levels(np.maximum(kf.uv_l[:, 0] - kf.uv_r[:, 0] - f.disparity_offset, 1e-3))
             for j in np.flatnonzero(np.isin(kf.ids, shared)).tolist():
-                measured = gtsam.StereoPoint2(kf.uv_l[j, 0], kf.uv_r[j, 0], kf.uv_l[j, 1])
+                measured = gtsam.StereoPoint2(kf.uv_l[j, 0], kf.uv_r[j, 0] + f.disparity_offset, kf.uv_l[j, 1])
                 landmark = gtsam.symbol("l", int(kf.ids[j]))
-                graph.add(gtsam.GenericStereoFactor3D(measured, self._noise_model(levels[j]), key, landmark, self._calibration))
+                graph.add(gtsam.GenericStereoFactor3D(measured, self._noise_model(3, levels[j]), key, landmark, self._stereo))
+        return graph, values
+
+    def _calibrating_graph(self, shared: np.ndarray) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+        """Left and right reprojection factors of the same observations, the right camera a camera
+        of its own: held to the left one by the baseline, with a calibration variable whose principal
+        point is free. Its horizontal offset from the left's is the disparity offset (observed
+        disparity = f B / z + offset), its vertical offset the rows' misalignment.
+
+        The offsets' prior is a Kalman filter's for a constant: centred on the estimate so far, its
+        1 / sigma^2 grows by the starting prior's worth with every calibrating window, about what
+        one window's observations are worth here. Far points keep their full weight here: with
+        parallax they measure the offset best.
+        """
+        graph, values = gtsam.NonlinearFactorGraph(), self._window_values(shared)
+        f, cfg = self.front, self.cfg
+        right_of_left = gtsam.Pose3(gtsam.Rot3(), np.array([f.baseline, 0.0, 0.0]))
+        values.insert(_RIGHT_OF_LEFT, right_of_left)  # a variable only because the factor wants one
+        graph.add(gtsam.PriorFactorPose3(_RIGHT_OF_LEFT, right_of_left, gtsam.noiseModel.Isotropic.Sigma(6, 1e-4)))
+        right = gtsam.Cal3_S2(f.fx, f.fy, 0.0, f.cx - f.disparity_offset, f.cy + f.row_offset)
+        values.insert(_RIGHT_CALIBRATION, right)
+        sigma = cfg.disparity_offset_sigma_px / np.sqrt(1 + self._calibrations)
+        fixed = 1e-3  # px: focal lengths and skew are the left camera's
+        prior = gtsam.noiseModel.Diagonal.Sigmas(np.array([fixed, fixed, fixed, sigma, sigma]))
+        graph.add(gtsam.PriorFactorCal3_S2(_RIGHT_CALIBRATION, right, prior))
+        self._add_fixed_pose(graph)
+        for kf in self._window:
+            key = gtsam.symbol("x", kf.frame)
+            uv_l, uv_r = kf.uv_l.astype(np.float64), kf.uv_r.astype(np.float64)
+            for j in np.flatnonzero(np.isin(kf.ids, shared)).tolist():
+                landmark = gtsam.symbol("l", int(kf.ids[j]))
+                graph.add(gtsam.GenericProjectionFactorCal3_S2(uv_l[j], self._noise_model(2, 0), key, landmark, self._left))
+                graph.add(ProjectionFactorPPPCCal3_S2(uv_r[j], self._noise_model(2, 0), key, _RIGHT_OF_LEFT, landmark, _RIGHT_CALIBRATION))
+        return graph, values
+
+    def _window_values(self, shared: np.ndarray) -> gtsam.Values:
+        values = gtsam.Values()
+        for kf in self._window:
+            values.insert(gtsam.symbol("x", kf.frame), gtsam.Pose3(self._poses[kf.frame]))
         for i in shared.tolist():
             values.insert(gtsam.symbol("l", i), self._points[i])
-        return graph, values
+        return values
+
+    def _add_fixed_pose(self, graph: gtsam.NonlinearFactorGraph) -> None:
+        """The oldest keyframe anchors the window."""
+        first = self._window[0].frame
+        graph.add(gtsam.NonlinearEqualityPose3(gtsam.symbol("x", first), gtsam.Pose3(self._poses[first])))
 
     def _noise_levels(self, disparity: np.ndarray) -> np.ndarray:
         """Per observation, the right image's sigma level: 0 up to stereo_depth_m, then one level
@@ -286,12 +362,20 @@ class WindowedOdometry:
         ratio = np.maximum(z / self.cfg.stereo_depth_m, 1.0)
         return np.round(4 * np.log2(ratio)).astype(int)  # quarter-octaves of sigma = ratio^2
 
-    def _noise_model(self, level: int) -> gtsam.noiseModel.Base:
-        if level not in self._noise:
-            sigma = self.cfg.huber_px
-            base = gtsam.noiseModel.Diagonal.Sigmas(np.array([1.0, 2.0 ** (level / 2), 1.0]))
-            self._noise[level] = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(sigma), base)
-        return self._noise[level]
+    def _noise_model(self, dim: int, level: int) -> gtsam.noiseModel.Base:
+        """Huber on unit sigmas, but a stereo factor's right-image u (row 1 of u_l, u_r, v) has
+        sigma 2^(level / 2)."""
+        if (dim, level) not in self._noise:
+            sigmas = np.ones(dim)
+            if dim == 3:
+                sigmas[1] = 2.0 ** (level / 2)
+            huber = gtsam.noiseModel.mEstimator.Huber.Create(self.cfg.huber_px)
+            self._noise[dim, level] = gtsam.noiseModel.Robust.Create(huber, gtsam.noiseModel.Diagonal.Sigmas(sigmas))
+        return self._noise[dim, level]
+
+
+# The calibrating window's right camera: where it sits on the left one, and its calibration.
+_RIGHT_OF_LEFT, _RIGHT_CALIBRATION = gtsam.symbol("e", 0), gtsam.symbol("c", 0)
 
 
 def _transform(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
