@@ -51,7 +51,14 @@ def results_markdown(evaluation: dict, label: dict, steering: dict, resamples: i
         "(`python -m offroad_path.evaluation.readme`; a test fails when it disagrees with them).\n",
         f"Labels: {label['labels']} from {label['sequences']} rendered sequences, {label['segments_dropped']} segments dropped; VO drift "
         f"over 20 m segments {label['translation_drift_pct']:.2f} % (worst sequence {label['translation_drift_pct_worst']:.2f} %), "
-        f"{label['rotation_drift_deg_per_m']:.4f} deg/m. Test set: {everything.get('frames', 'n/a')} images (frames and their mirrored "
+        f"{label['rotation_drift_deg_per_m']:.4f} deg/m"
+        + (
+            f"; the rig's disparity offset as the VO estimated it, {label['vo_disparity_offset_px_mean']:+.3f} px on average "
+            f"(largest {label['vo_disparity_offset_px_largest']:+.3f} px)"
+            if "vo_disparity_offset_px_mean" in label
+            else ""
+        )
+        + f". Test set: {everything.get('frames', 'n/a')} images (frames and their mirrored "
         f"copies) from {everything.get('sequences', 'n/a')} held-out test sequences, {blocks} blocks of 20 m of driving; "
         f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % block bootstrap over those blocks "
         f"({resamples} resamples); they cover which stretches of driving were tested"
