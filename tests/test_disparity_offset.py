@@ -48,12 +48,17 @@ def odometry(compose_config, seq, *overrides: str) -> tuple[float, OdometryRun]:
     return drift(run.poses, seq.poses, 20.0, run.pieces)[0].translation_drift_pct, run
 
 
-def test_the_odometry_finds_a_rigs_disparity_offset_and_keeps_its_scale(compose_config, drive):
+@pytest.fixture(scope="module")
+def own(compose_config, drive) -> OdometryRun:
+    """The rendered rig's odometry, offsets estimated: what the tests measure a misaligned rig against."""
+    return odometry(compose_config, open_sequence(drive / "drive"))[1]
+
+
+def test_the_odometry_finds_a_rigs_disparity_offset_and_keeps_its_scale(compose_config, drive, own):
     """Through a rig 0.3 px short of disparity the estimate moves by -0.3 px from the rendered rig's
     own (which is near 0); taken as zero, the same offset makes every depth long and the path with it
     (measured: 0.77 % against 2.96 % on this 40-frame drive, 0.36 % and 0.18 % without the offset)."""
     seq = open_sequence(drive / "drive")
-    _, own = odometry(compose_config, seq)
     short = misaligned(seq, -0.3)
     estimated_drift, estimated = odometry(compose_config, short)
     ignored_drift, ignored = odometry(compose_config, short, "label.odometry.disparity_offset_sigma_px=0")
@@ -61,6 +66,14 @@ def test_the_odometry_finds_a_rigs_disparity_offset_and_keeps_its_scale(compose_
     assert estimated.disparity_offset_px - own.disparity_offset_px == pytest.approx(-0.3, abs=0.05)
     assert ignored.disparity_offset_px is None and np.isnan(ignored.steps[-1].disparity_offset_px)
     assert estimated_drift < 1.0 and ignored_drift > 2.5
+
+
+def test_the_odometry_finds_a_rigs_row_offset(compose_config, drive, own):
+    """Right-image rows 0.5 px low: the row offset moves by +0.5 px from the rendered rig's own, the
+    disparity offset stays where it was."""
+    _, low = odometry(compose_config, misaligned(open_sequence(drive / "drive"), 0.0, row_offset_px=0.5))
+    assert low.row_offset_px - own.row_offset_px == pytest.approx(0.5, abs=0.05)
+    assert low.disparity_offset_px == pytest.approx(own.disparity_offset_px, abs=0.03)
 
 
 def test_the_report_carries_the_estimate_and_warns_past_the_threshold(drive, tmp_path):
