@@ -27,6 +27,7 @@ def test_paper_preset_has_the_publications_numbers(compose_config, model):
     # SegNet's step function (its milestones this project's choice), a fixed rate otherwise; no warm-up.
     assert list(cfg.model.lr_milestones) == ([0.5, 0.75] if model == "segnet" else []) and cfg.model.lr_warmup == 0
     assert (cfg.data.width, cfg.data.height, cfg.model.width) == (512, 288, 1.0)
+    assert (cfg.world.width, cfg.world.height, cfg.postprocess.sigma) == (512, 288, 6.0)  # the camera's images; "sigma = 6"
     # Labels: 10 fps, the next D = 20 m, restarted midway, no occlusion handling.
     assert (cfg.world.fps, cfg.label.distance_m, cfg.label.strategy, cfg.label.occlusion.enabled) == (10.0, 20.0, "midway", False)
     # "the 10% of our dataset that was set aside for testing", per image, mirrored copies, no validation set.
@@ -38,11 +39,23 @@ def test_paper_preset_has_the_publications_numbers(compose_config, model):
 
 def test_full_preset_is_the_paper_size_with_the_projects_fixes(compose_config):
     paper, full = compose_config("experiment=paper"), compose_config("experiment=full")
-    for key in ("data.width", "data.height", "model.width", "model.lr", "world.fps", "world.frames", "synthesize.sequences"):
+    for key in ("data.width", "data.height", "model.width", "model.lr", "world.fps", "world.frames", "world.width", "synthesize.sequences"):
         assert paper[key.split(".")[0]][key.split(".")[1]] == full[key.split(".")[0]][key.split(".")[1]], key
     assert (full.split.strategy, full.split.val_fraction, full.label.occlusion.enabled, full.data.augment) == ("grouped", 0.1, True, True)
     assert full.train.max_steps == -1 and full.callbacks.early_stopping.patience > 0
     assert full.synthesize.test_worlds.min_blocks == 30  # held-out test worlds, as the laptop default
+
+
+def test_laptop_reference_is_the_laptop_preset_before_the_speed_round(compose_config):
+    """The seed rule's reference (benchmarks/README.md): one override gives the old laptop values back."""
+    laptop, reference = compose_config(), compose_config("experiment=laptop_reference")
+    old = {"world.width": 512, "world.height": 288, "postprocess.sigma": 6.0, "evaluate.figure_scale": 0.5,
+           "pretrain.max_epochs": 4}  # fmt: skip
+    for key, value in old.items():
+        group, name = key.split(".")
+        assert reference[group][name] == value != laptop[group][name], key
+    for group in ("data", "model", "trainer", "label", "split", "synthesize", "steering"):  # the rest is the laptop's
+        assert reference[group] == laptop[group], group
 
 
 def full_size_on_cpu(tmp_path, split_dir) -> list[str]:

@@ -1,0 +1,117 @@
+"""`dvc repro` stage by stage: seconds from each stage's start to the next one's (DVC's hashing and
+caching of a stage's outputs count in that stage), idle or beside another CPU-heavy process.
+
+    python benchmarks/pipeline_time.py [--beside-load] [--log OUT] [-- <dvc repro arguments>]
+    python benchmarks/pipeline_time.py --parse LOG [--mlflow-db mlflow.db]
+
+Run in a checkout (a fresh clone for "from nothing": no data/, no .dvc/cache). Every line of
+`dvc repro`'s output is stamped with the epoch second it came (written to --log), and the table
+groups a matrix stage's runs (train_scratch@unet-0 ...) under its name. `--beside-load` runs a
+second process that multiplies matrices on torch's default threads all along, as another training
+job would. `--parse` prints the table of a log written before. With the run's MLflow store
+(`--mlflow-db`, the default mlflow.db when it exists), each stage that logs a run is split into its
+start-up (the process's imports, Hydra, data set-up and MLflow's store, until its run starts), the
+run itself, and its end (the run's end to the next stage's start: process exit, DVC hashing and
+caching its outputs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+BUSY = "import torch\nx = torch.randn(1024, 1024)\nwhile True:\n    x = (x @ x).clamp(-1, 1)\n"
+STAGE = re.compile(r"^Running stage '([^']+)'")
+
+
+def stage_seconds(lines: list[tuple[float, str]]) -> list[tuple[str, float]]:
+    """(stage, seconds) in the order run: from its 'Running stage' line to the next one or the end."""
+    starts = [(when, m.group(1)) for when, text in lines if (m := STAGE.match(text))]
+    ends = [when for when, _ in starts[1:]] + [lines[-1][0]]
+    return [(name, end - start) for (start, name), end in zip(starts, ends, strict=True)]
+
+
+def table(lines: list[tuple[float, str]]) -> str:
+    grouped: dict[str, list[float]] = {}
+    for name, seconds in stage_seconds(lines):
+        grouped.setdefault(name.split("@")[0], []).append(seconds)
+    rows = ["| stage | runs | seconds | each |", "| --- | --- | --- | --- |"]
+    for name, each in grouped.items():
+        rows.append(f"| {name} | {len(each)} | {sum(each):.0f} | {' + '.join(f'{s:.0f}' for s in each)} |")
+    total = lines[-1][0] - lines[0][0]
+    rows.append(f"| **total** | | **{total:.0f} ({int(total // 60)} min {total % 60:.0f} s)** | |")
+    return "\n".join(rows)
+
+
+def overheads(lines: list[tuple[float, str]], db: Path) -> str:
+    """Per stage with an MLflow run inside its window: seconds before the run, of the run, after it."""
+    with sqlite3.connect(db) as connection:
+        runs = connection.execute("select start_time / 1000.0, end_time / 1000.0 from runs where end_time is not null").fetchall()
+    rows = ["| stage | start-up | run | end |", "| --- | --- | --- | --- |"]
+    totals = [0.0, 0.0, 0.0]
+    clock = lines[0][0]
+    for name, seconds in stage_seconds(lines):
+        start = next(when for when, text in lines if when >= clock and text.startswith(f"Running stage '{name}'"))
+        clock, end = start, start + seconds
+        inside = [(a, b) for a, b in runs if start <= a <= end]
+        if len(inside) != 1:
+            continue
+        parts = (inside[0][0] - start, inside[0][1] - inside[0][0], end - inside[0][1])
+        totals = [t + p for t, p in zip(totals, parts, strict=True)]
+        rows.append(f"| {name} | {parts[0]:.1f} | {parts[1]:.1f} | {parts[2]:.1f} |")
+    rows.append(f"| **sum** | **{totals[0]:.0f}** | **{totals[1]:.0f}** | **{totals[2]:.0f}** |")
+    return "\n".join(rows)
+
+
+def read_log(path: Path) -> list[tuple[float, str]]:
+    lines = []
+    for line in path.read_text().splitlines():
+        stamp, _, text = line.partition(" ")
+        lines.append((float(stamp), text))
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--beside-load", action="store_true", help="run a torch matrix-multiplying process beside it")
+    parser.add_argument("--log", type=Path, default=Path("pipeline_time.log"))
+    parser.add_argument("--parse", type=Path, help="only print the table of an earlier --log")
+    parser.add_argument("--mlflow-db", type=Path, default=Path("mlflow.db"), help="the run's MLflow store, for start-up and end times")
+    parser.add_argument("dvc_args", nargs="*", help="arguments of dvc repro, after --")
+    args = parser.parse_args()
+    if args.parse:
+        lines = read_log(args.parse)
+        print(table(lines))
+        if args.mlflow_db.is_file():
+            print("\n" + overheads(lines, args.mlflow_db))
+        return
+    busy = subprocess.Popen([sys.executable, "-c", BUSY]) if args.beside_load else None
+    lines = [(time.time(), "start")]
+    try:
+        with subprocess.Popen(["dvc", "repro", *args.dvc_args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as dvc, \
+             args.log.open("w") as log:  # fmt: skip
+            log.write(f"{lines[0][0]:.1f} start\n")
+            for text in dvc.stdout:
+                lines.append((time.time(), text.rstrip("\n")))
+                log.write(f"{lines[-1][0]:.1f} {lines[-1][1]}\n")
+                log.flush()
+        lines.append((time.time(), "end"))
+        with args.log.open("a") as log:
+            log.write(f"{lines[-1][0]:.1f} end\n")
+    finally:
+        if busy:
+            busy.kill()
+    if dvc.returncode:
+        sys.exit(f"dvc repro failed ({dvc.returncode}); its output: {args.log}")
+    print(table(lines))
+    if args.mlflow_db.is_file():
+        print("\n" + overheads(lines, args.mlflow_db))
+
+
+if __name__ == "__main__":
+    main()
