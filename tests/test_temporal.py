@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from offroad_path.data.manifest import read_manifest
-from offroad_path.evaluation.temporal import held_out_blocks, load_block, score_temporal, stability
+from offroad_path.evaluation.temporal import held_out_blocks, last_labellable, load_block, score_temporal, stability
 from offroad_path.postprocessing.temporal import TemporalFilter, warp_previous
 from offroad_path.sequence.reader import open_sequence
 
@@ -55,7 +55,7 @@ def test_filter_is_an_exponential_average_where_the_warp_holds():
 def test_exact_labels_of_every_test_block_frame_are_steady(compose_config, labelled_drive, split_dir):
     cfg = compose_config()
     samples = read_manifest(split_dir / "test.csv")
-    blocks = held_out_blocks([s for s in samples if not s.mirrored], labelled_drive, block_m=4.0)
+    blocks = held_out_blocks([s for s in samples if not s.mirrored], labelled_drive, block_m=4.0, distance_m=cfg.label.distance_m)
     every = [f for b in blocks for f in b.frames]
     assert {s.f0 for s in samples} <= set(every) and len(every) == len(set(every))  # each test frame once, with the frames between
     assert all(b.frames == list(range(b.frames[0], b.frames[-1] + 1)) for b in blocks)
@@ -67,12 +67,26 @@ def test_exact_labels_of_every_test_block_frame_are_steady(compose_config, label
     assert min(steady) > 0.85 and np.mean(shaken) < np.mean(steady) - 0.05
 
 
+def test_blocks_end_where_the_true_poses_leave_no_label_distance(labelled_drive, split_dir):
+    straight = np.stack([np.eye(4)] * 30)
+    straight[:, 2, 3] = np.arange(30.0)  # a frame every metre
+    assert last_labellable(straight, 20.0) == 8 and last_labellable(straight, 29.0) == -1  # 29 - 8 = 21 > 20; nothing is > 29 m
+    samples = [s for s in read_manifest(split_dir / "test.csv") if not s.mirrored]
+    (seq,) = {b.run.sequence.root: b.run.sequence for b in held_out_blocks(samples, labelled_drive, 4.0, 20.0)}.values()
+    top = max(s.f0 for s in samples)
+    # A label distance a little longer than the true driving after the last test f0: it and the frames
+    # just before it cannot be labelled exactly (the VO's distances may run that long), so the blocks end earlier.
+    distance = np.linalg.norm(seq.poses[top + 1 :, :3, 3] - seq.poses[top, :3, 3], axis=1).max() + 0.5
+    short = held_out_blocks(samples, labelled_drive, 4.0, distance)
+    assert short and max(f for b in short for f in b.frames) == last_labellable(seq.poses, distance) < top
+
+
 def test_every_network_scored_on_every_test_block_frame(compose_config, labelled_drive, split_dir, trained, tmp_path):
     checkpoint, _, _ = trained
     cfg = compose_config(f"evaluate.labels_dir={labelled_drive}", "split.block_m=4")
     samples = read_manifest(split_dir / "test.csv")
     rows = score_temporal(cfg.evaluate, cfg.label, cfg.split.block_m, {"unet-none": checkpoint, "unet-copy": checkpoint}, samples)
-    frames = sum(len(b.frames) for b in held_out_blocks([s for s in samples if not s.mirrored], labelled_drive, 4.0))
+    frames = sum(len(b.frames) for b in held_out_blocks([s for s in samples if not s.mirrored], labelled_drive, 4.0, cfg.label.distance_m))
     assert list(rows) == ["unet-none", "unet-copy"] and rows["unet-none"].frames == frames
     assert rows["unet-none"].method == "U-Net (none)" and rows["unet-none"].iou == rows["unet-copy"].iou  # same weights, same scores
     assert all(0 <= getattr(rows["unet-none"], k) <= 1 for k in ("iou", "iou_filtered", "stability", "stability_filtered"))

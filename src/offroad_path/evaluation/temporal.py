@@ -60,9 +60,18 @@ class Block:
     true_depth: list[np.ndarray] = field(default_factory=list)  # for the stability score
 
 
-def held_out_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> list[Block] | None:
+def last_labellable(poses: np.ndarray, distance_m: float) -> int:
+    """The last frame with a frame farther than distance_m after it (-1: none)."""
+    positions = poses[:, :3, 3]
+    ahead = [np.any(np.linalg.norm(positions[f + 1 :] - positions[f], axis=1) > distance_m) for f in range(len(positions))]
+    return int(np.flatnonzero(ahead)[-1]) if any(ahead) else -1
+
+
+def held_out_blocks(samples: list[Sample], labels_dir: Path, block_m: float, distance_m: float) -> list[Block] | None:
     """The test set's blocks of driving (the split's block_m along the label run's poses), each
-    every frame from its first to its last test f0; None when a sequence lacks true poses or depth."""
+    every frame from its first to its last test f0; None when a sequence lacks true poses or depth.
+    Frames with less than distance_m of true driving after them are left out: the label stage chose
+    its f0s by the VO's distances, which may run a little long."""
     runs = {r.name: r for r in read_label_run(labels_dir)}
     groups: dict[tuple[str, int], list[int]] = {}
     for sample in samples:
@@ -70,7 +79,9 @@ def held_out_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> 
         if run.sequence.poses is None or run.sequence.depth is None:
             return None
         groups.setdefault(block_of(sample.sequence, run.distance()[sample.f0], block_m), []).append(sample.f0)
-    return [Block(runs[name], list(range(min(f0s), max(f0s) + 1))) for (name, _), f0s in sorted(groups.items())]
+    last = {name: last_labellable(runs[name].sequence.poses, distance_m) for name, _ in groups}
+    blocks = [Block(runs[name], list(range(min(f0s), min(max(f0s), last[name]) + 1))) for (name, _), f0s in sorted(groups.items())]
+    return [b for b in blocks if b.frames]
 
 
 def load_block(block: Block, label: DictConfig) -> None:
@@ -131,7 +142,7 @@ def score_temporal(
     t = e.temporal
     if not t.enabled:
         return None
-    blocks = held_out_blocks([s for s in samples if not s.mirrored], Path(e.labels_dir), block_m)
+    blocks = held_out_blocks([s for s in samples if not s.mirrored], Path(e.labels_dir), block_m, label.distance_m)
     if blocks is None:
         log.info("temporal consistency: the test sequences have no true poses and depth; skipped")
         return None
