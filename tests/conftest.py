@@ -71,11 +71,12 @@ def kitti_snippet() -> Path:
 
 @pytest.fixture(scope="session")
 def drive(compose_config, tmp_path_factory) -> Path:
-    """A folder with one 40-frame laptop-preset drive (about 40 m), rendered once per session."""
+    """A folder with one 40-frame drive (about 40 m) of the laptop world at the paper's 512 x 288,
+    rendered once per session: the odometry tests' bounds are for that size."""
     from offroad_path.world.record import record_sequence
 
     root = tmp_path_factory.mktemp("world") / "recordings"
-    record_sequence(compose_config("world.frames=40").world, seed=21, out_dir=root / "drive")
+    record_sequence(compose_config("world.frames=40", "world.width=512", "world.height=288").world, seed=21, out_dir=root / "drive")
     return root
 
 

@@ -18,9 +18,11 @@ NEAR = np.full((H, W), 5.0, np.float32)  # every pixel 5 m away: the depth mask 
 PAPER = PostprocessParams(max_depth_m=20.0, sigma=6.0, delta=0.025, use_depth=True, unknown_depth="keep")  # Holder & Breckon's
 
 
-def test_the_default_config_holds_the_papers_values(compose_config):
-    params = PostprocessParams.from_config(compose_config().postprocess)
-    assert replace(params, blur_scale=1) == PAPER and params.blur_scale == 2  # the blur at half resolution, bounded below
+def test_the_config_holds_the_papers_values(compose_config):
+    paper = PostprocessParams.from_config(compose_config("experiment=paper").postprocess)
+    assert replace(paper, blur_scale=1) == PAPER and paper.blur_scale == 2  # the blur at half resolution, bounded below
+    laptop = compose_config()  # the paper's sigma in pixels of its 512-pixel-wide images, at the laptop world's width
+    assert PostprocessParams.from_config(laptop.postprocess) == replace(paper, sigma=6.0 * laptop.world.width / 512)
 
 
 def network_like_map(seed: int, h: int = 288, w: int = 512) -> tuple[np.ndarray, np.ndarray]:
