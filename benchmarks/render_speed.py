@@ -1,8 +1,8 @@
 """Render throughput of the synthetic world: stereo frames per second.
 
-    python benchmarks/render_speed.py [--sequences 4] [--frames 40] [--set world.width=512 world.height=288]
+    python benchmarks/render_speed.py [--sequences 4] [--frames 40] [--set world.width=256 world.height=144]
 
-Renders the default world (the embedded default settings, the laptop's 256 x 144, with any `--set`
+Renders the default world (the embedded default settings, 512 x 288, with any `--set`
 overrides) into a temporary folder with the real
 synthesize code path (world build, both views, PNG writing), once on one worker and once on
 every core, and prints frames per second for each.
