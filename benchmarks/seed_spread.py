@@ -39,13 +39,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy import stats
 
 from offroad_path.data.loading import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
 from offroad_path.evaluation.metrics import counts, mean_path, pooled
-
-# Two-sided 95 % Student t quantiles by degrees of freedom (scipy.stats.t.ppf(0.975, df)).
-T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262}
 
 
 def key(sample: Sample) -> str:
@@ -63,19 +61,14 @@ def test_counts(run_dir: Path, yardstick: dict[str, str] | None, threshold: floa
     """Per test image (by frame key) the counts tp, fp, tn, fn of the run's maps, against its own test
     labels or, with a yardstick, against those (maps resized bilinearly to their size; frames it lacks left out)."""
     rows = read_predictions_manifest(run_dir / "predictions" / "manifest.csv", "train")
-    if yardstick is None:
-        samples, paths = [s for s, _ in rows], [p for _, p in rows]
-        per_image = counts(load_maps(paths), load_labels(samples), threshold)
-        return {key(s): c.tolist() for s, c in zip(samples, per_image, strict=True)}
-    out = {}
-    for sample, path in rows:
-        if key(sample) not in yardstick:
-            continue
-        label = cv2.imread(yardstick[key(sample)], cv2.IMREAD_GRAYSCALE) > 0
-        label = label[:, ::-1] if sample.mirrored else label
-        confidence = cv2.resize(np.load(path).astype(np.float32), label.shape[::-1], interpolation=cv2.INTER_LINEAR)
-        out[key(sample)] = counts(confidence[None], label[None], threshold)[0].tolist()
-    return out
+    if yardstick is not None:
+        rows = [(replace(s, label=yardstick[key(s)]), p) for s, p in rows if key(s) in yardstick]
+    samples, labels = [s for s, _ in rows], load_labels([s for s, _ in rows])
+    maps = load_maps([p for _, p in rows])
+    if maps.shape != labels.shape:
+        maps = np.stack([cv2.resize(m, labels.shape[:0:-1], interpolation=cv2.INTER_LINEAR) for m in maps])
+    per_image = counts(maps, labels, threshold)
+    return {key(s): c.tolist() for s, c in zip(samples, per_image, strict=True)}
 
 
 def prior_counts(yardstick: dict[str, str] | None, threshold: float = 0.5) -> dict[str, list[int]]:
@@ -144,7 +137,7 @@ def compare(reference: dict, candidate: dict) -> bool:
         n, mean_d = len(diffs), statistics.mean(diffs)
         sd = statistics.stdev(diffs) if n > 1 else math.nan
         se = sd / math.sqrt(n)
-        half = T95.get(n - 1, 1.96) * se
+        half = float(stats.t.ppf(0.975, n - 1)) * se
         ok = mean_d >= -se and min(new_iou) > prior
         admissible_all &= ok
         print(f"| {model} | {statistics.mean(old_iou):.4f} | {statistics.mean(new_iou):.4f} | "
