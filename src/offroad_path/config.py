@@ -62,6 +62,17 @@ class VehicleConfig:
 
 
 @dataclass
+class SlipConfig:
+    """Traction below the kinematic bicycle model's (offroad_path.world.slip): off by default."""
+
+    enabled: bool = MISSING  # synthesize: the recorded steering is the input that made the motion under slip
+    factors: dict[str, float] = field(default_factory=dict)  # yaw-rate factor per surface class name; 1 where absent
+    patch_m: float = setting(positive())  # the factor's jitter is drawn once per square patch this wide
+    jitter: float = setting(between(0, 1, high_open=True))  # patch factors in [1 - jitter, 1 + jitter] times the surface's
+    noise: float = setting(at_least(0))  # per-step (per-frame) noise of the factor, a standard deviation
+
+
+@dataclass
 class WorldConfig:
     """One rendered sequence's generator settings; per-sequence variation is drawn around these."""
 
@@ -88,6 +99,7 @@ class WorldConfig:
     paved_fraction: float = MISSING
     sun_elevation_deg: tuple[float, float] = MISSING
     density_jitter: float = MISSING  # per-sequence density factor drawn in [1 - j, 1 + j]
+    slip: SlipConfig = field(default_factory=SlipConfig)
 
 
 @dataclass
@@ -413,6 +425,39 @@ class SteeringConfig:
 
 
 @dataclass
+class DriveConfig:
+    """Closed-loop driving in the test worlds (offroad_path.driving)."""
+
+    synthetic_dir: str = MISSING
+    runs_dir: str = MISSING
+    pilotnet_checkpoint: str | None = MISSING
+    out_dir: str = MISSING
+    metrics_path: str = MISSING
+    arguments: dict[str, list[str]] = field(default_factory=dict)  # steering | vehicle | traction -> policy names
+    worlds: int | None = setting(at_least(1))
+    starts_per_world: int = setting(at_least(1))
+    length_m: float = setting(positive())
+    width: int = setting(IMAGE_SIZE)
+    height: int = setting(IMAGE_SIZE)
+    rate_hz: float = setting(positive())
+    speed_mps: float = setting(positive())
+    steering_rate_deg_s: float = setting(positive())
+    corridor_m: float = setting(positive())
+    body_band_m: tuple[float, float] = MISSING
+    water_intervenes: bool = MISSING
+    respawn_m: float = setting(positive())
+    intervention_s: float = setting(positive())
+    timeout_factor: float = setting(at_least(1))
+    lookahead_m: float = setting(positive())
+    threshold: float = setting(between(0, 1))
+    temporal_alpha: float = setting(between(0, 1, low_open=True))
+    video: bool = MISSING
+    other_vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    bootstrap: BootstrapConfig = field(default_factory=BootstrapConfig)
+    workers: int = setting(at_least(0))
+
+
+@dataclass
 class PredictConfig:
     """Run a trained path model on new footage."""
 
@@ -468,6 +513,7 @@ class Config:
     postprocess: PostprocessConfig = field(default_factory=PostprocessConfig)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
     steering: SteeringConfig = field(default_factory=SteeringConfig)
+    drive: DriveConfig = field(default_factory=DriveConfig)
     predict: PredictConfig = field(default_factory=PredictConfig)
     export: ExportConfig = field(default_factory=ExportConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)

@@ -16,6 +16,7 @@ from offroad_path.world.classes import BASE_COLORS, DIRT, GRASS, PAVED, WATER
 from offroad_path.world.kernels import gaussian_blur, resize_cubic
 from offroad_path.world.objects import Objects
 from offroad_path.world.placement import Placement, place_objects
+from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip
 from offroad_path.world.terrain import Grid, Terrain, fourier_hills, polyline_mask, value_noise
 from offroad_path.world.trajectory import (
     ARC_STEP_M,
@@ -56,6 +57,12 @@ class World:
     steering: np.ndarray  # (frames,) normalised steering
     textures: dict[str, np.ndarray]
     forks: list[Curve]  # side tracks the drive does not take
+    slip: Slip | None = None  # traction below the bicycle model's (world.slip); None: none
+
+    def surface(self, xz: np.ndarray) -> np.ndarray:
+        """Class ids (N,) of the ground at points xz (N, 2)."""
+        row, col = self.material_grid.nearest(xz[:, 0], xz[:, 1])
+        return self.materials[row, col]
 
 
 def vehicle_geometry(cfg: WorldConfig) -> VehicleGeometry:
@@ -111,14 +118,22 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
 
     vehicle = vehicle_geometry(cfg)
     poses = camera_poses(drive, frame_s, terrain, vehicle)
-    steering = normalised_steering(drive.at(frame_s)[2], vehicle)
+    frame_xz, _, frame_curvature = drive.at(frame_s)
+    slip = make_slip(cfg.slip, seed, lo, hi) if cfg.slip.enabled else None
+    if slip is not None:
+        # The recorded steering is the driver's input that made the true motion on this ground: the
+        # bicycle model's angle for the curvature over the factor (its noise drawn per frame).
+        noise = np.random.default_rng(np.random.SeedSequence([seed, SLIP_STREAM, 1])).normal(0.0, slip.noise, len(frame_s))
+        factor = np.maximum(slip.factor(materials[mgrid.nearest(frame_xz[:, 0], frame_xz[:, 1])], frame_xz) * (1 + noise), 0.05)
+        frame_curvature = frame_curvature / factor
+    steering = normalised_steering(frame_curvature, vehicle)
 
     sky = _sky(rng, cfg)
     objects = place_objects(Placement(rng, cfg, terrain, drive), track, density)
     shadow = _shadow_map(mgrid, terrain, objects, sky.sun)
     palette = _palette(rng)
     textures = _textures(rng)
-    return World(terrain, materials, mgrid, shadow, objects, palette, sky, drive, track, frame_s, poses, steering, textures, forks)
+    return World(terrain, materials, mgrid, shadow, objects, palette, sky, drive, track, frame_s, poses, steering, textures, forks, slip)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> Grid:

@@ -86,6 +86,12 @@ class VehicleGeometry:
 def camera_poses(curve: Curve, s: np.ndarray, terrain: Terrain, vehicle: VehicleGeometry) -> np.ndarray:
     """Left-camera-to-world poses (N, 4, 4) for a vehicle whose four wheels touch the terrain."""
     xz, heading, _ = curve.at(s)
+    return camera_poses_at(xz, heading, terrain, vehicle)
+
+
+def camera_poses_at(xz: np.ndarray, heading: np.ndarray, terrain: Terrain, vehicle: VehicleGeometry) -> np.ndarray:
+    """Left-camera-to-world poses (N, 4, 4) of a vehicle whose body centre is at xz (N, 2) with
+    headings (N,), its four wheels on the terrain (closed-loop driving poses it anywhere)."""
     fwd2 = np.stack([np.sin(heading), np.cos(heading)], axis=1)
     right2 = np.stack([np.cos(heading), -np.sin(heading)], axis=1)
     half_wb, half_tr = vehicle.wheelbase_m / 2, vehicle.track_m / 2
@@ -108,7 +114,7 @@ def camera_poses(curve: Curve, s: np.ndarray, terrain: Terrain, vehicle: Vehicle
     y_cam = np.cos(tilt) * down - np.sin(tilt) * forward
     origin = centre - vehicle.camera_height_m * down + vehicle.camera_forward_m * forward
 
-    poses = np.tile(np.eye(4), (len(s), 1, 1))
+    poses = np.tile(np.eye(4), (len(xz), 1, 1))
     poses[:, :3, 0] = right
     poses[:, :3, 1] = y_cam
     poses[:, :3, 2] = z_cam

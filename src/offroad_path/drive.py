@@ -1,0 +1,106 @@
+"""Stage `drive`: closed-loop driving in the held-out test worlds, the paper's three arguments
+against end-to-end steering tested by driving (see offroad_path.driving).
+
+    python -m offroad_path.drive [drive.worlds=2] [drive.length_m=100] [drive.arguments.vehicle='[unet-none,pilotnet]']
+
+Writes drive.out_dir (data/drive): results.md (one table per argument), drive.json,
+trajectories/<argument>/<world>.png, videos/<policy>.mp4; drive.metrics_path (metrics/drive.json,
+for `dvc metrics show`); an MLflow run.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from offroad_path.driving.loop import DriveLog
+from offroad_path.driving.report import ARGUMENTS, finding, score, table, versus_pilotnet
+from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, WorldJob, checkpoint_of, drive_params, drive_world, test_worlds
+from offroad_path.evaluation.bootstrap import Resampling
+from offroad_path.stage import hydra_stage, reads
+from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.utils.outputs import Outputs
+from offroad_path.utils.parallel import map_processes
+from offroad_path.utils.tracking import flatten, stage_run
+
+log = logging.getLogger("offroad_path.drive")
+
+
+def outputs(cfg: DictConfig) -> Outputs:
+    d = cfg.drive
+    inputs = [d.synthetic_dir, d.runs_dir, d.pilotnet_checkpoint]
+    return Outputs("drive", folders={"drive.out_dir": d.out_dir}, files={"drive.metrics_path": d.metrics_path}, inputs=inputs)
+
+
+def check_policies(d: DictConfig, seed: int) -> None:
+    """Every argument is known and every policy's checkpoint exists, before any world is built."""
+    if unknown := sorted(set(d.arguments) - set(ARGUMENTS)):
+        raise ValueError(f"drive.arguments: unknown argument {unknown[0]!r} (arguments: {', '.join(ARGUMENTS)})")
+    for argument, names in d.arguments.items():
+        for name in names:
+            if name.removesuffix(TEMPORAL) in BUILT_IN and name not in BUILT_IN:
+                raise ValueError(f"drive.arguments.{argument}: {name!r}: the temporal filter is for path networks only")
+            checkpoint = checkpoint_of(name, d, seed)
+            if checkpoint is not None and not checkpoint.is_file():
+                raise FileNotFoundError(f"drive.arguments.{argument}: policy {name!r} needs {checkpoint}, which does not exist "
+                                        f"(a run name of the train stage, {TEMPORAL} after one, or one of {', '.join(BUILT_IN)})")  # fmt: skip
+
+
+@reads("drive", "world", "postprocess", "label", "mlflow", writes=outputs)
+def run_drive(cfg: DictConfig) -> dict:
+    d = cfg.drive
+    check_policies(d, cfg.seed)
+    worlds = test_worlds(Path(d.synthetic_dir), d.worlds)
+    params = drive_params(cfg.postprocess, d.width, cfg.world.width)
+    resampling = Resampling(d.bootstrap.resamples, d.bootstrap.seed, d.bootstrap.level)
+    started = time.perf_counter()
+    with atomic_directory(d.out_dir, "drive", key="drive.out_dir") as tmp:
+        jobs = [WorldJob(w, cfg.world, d, cfg.seed, params, cfg.label.disparity, str(tmp), d.video and i == 0) for i, w in enumerate(worlds)]
+        results = map_processes(drive_world, jobs, d.workers, [f"test world {w.folder}" for w in worlds])
+        logs: dict[str, dict[str, list[DriveLog]]] = {argument: {} for argument in d.arguments}
+        for per_world in results:
+            for argument, g in per_world:
+                logs[argument].setdefault(g.policy, []).append(g)
+        metrics, sections = {}, [f"# Closed-loop driving\n\n{len(worlds)} test worlds x {d.starts_per_world} start(s), "
+                                 f"{d.length_m:g} m of progress each, at {d.speed_mps:g} m/s with {d.rate_hz:g} Hz control; "
+                                 f"95 % intervals by resampling the {len(worlds) * d.starts_per_world} drives "
+                                 f"({d.bootstrap.resamples} resamples). An intervention: the body more than {d.corridor_m:g} m "
+                                 f"from every centre line, or into an object{', or into water' if d.water_intervenes else ''}.\n"]  # fmt: skip
+        for argument, by_policy in logs.items():
+            scores = [score(group, d.intervention_s, resampling) for group in by_policy.values()]
+            comparisons = versus_pilotnet(by_policy, resampling)
+            sentence = finding(scores, comparisons)
+            metrics[argument] = {"policies": {s.policy: s.as_dict() for s in scores},
+                                 "versus_pilotnet": {n: {"value": i.estimate, "low": i.low, "high": i.high} for n, i in comparisons.items()},
+                                 "finding": sentence}  # fmt: skip
+            sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores, comparisons)}\n\n{sentence}\n")
+        metrics["drives"] = {"worlds": [w.name for w in worlds], "starts_per_world": d.starts_per_world, "length_m": d.length_m}
+        (tmp / "results.md").write_text("".join(sections))
+        (tmp / "drive.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    write_text_atomic(d.metrics_path, json.dumps(metrics, indent=2) + "\n", "drive")
+    log.info("drove %d test worlds in %.0f s; %s", len(worlds), time.perf_counter() - started,
+             "; ".join(f"{a}: {m['finding']}" for a, m in metrics.items() if a in ARGUMENTS))  # fmt: skip
+    log_to_mlflow(cfg, metrics)
+    return metrics
+
+
+def log_to_mlflow(cfg: DictConfig, metrics: dict) -> None:
+    with stage_run(cfg, "drive") as run:
+        if run is None:
+            return
+        import mlflow
+
+        numbers = {k: v for k, v in flatten({a: m for a, m in metrics.items() if a in ARGUMENTS}).items() if isinstance(v, int | float)}
+        mlflow.log_metrics({k.replace("+", "_"): v for k, v in numbers.items() if v == v})  # NaN is not a metric
+        mlflow.log_artifacts(cfg.drive.out_dir)
+
+
+main = hydra_stage(run_drive)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,206 @@
+"""Driving one test world: rebuild it from its seed, make each argument's vehicle, course and
+policies, drive every policy from every start, and draw the world's trajectory plots (and, for the
+first world, a video per policy). One world is one job of the drive stage's worker processes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import matplotlib
+import numpy as np
+import torch
+
+from offroad_path.driving.course import Course
+from offroad_path.driving.loop import DriveLog, LoopSettings, drive
+from offroad_path.driving.policies import Camera, OraclePolicy, PathPolicy, PilotNetPolicy, Policy, StraightPolicy
+from offroad_path.driving.vehicle import Vehicle
+from offroad_path.geometry.path import path_length
+from offroad_path.geometry.stereo import sgbm
+from offroad_path.postprocessing import PostprocessParams
+from offroad_path.world.render import PinholeCamera
+from offroad_path.world.scene import World, build_world, vehicle_geometry
+from offroad_path.world.slip import SLIP_STREAM, make_slip
+from offroad_path.world.trajectory import VehicleGeometry
+
+matplotlib.use("Agg")
+TEMPORAL = "+temporal"
+BUILT_IN = ("pilotnet", "oracle", "straight")
+END_MARGIN_M = 30.0  # starts leave this much reference drive beyond a drive's end, for the pursuit's look-ahead
+
+
+@dataclass(frozen=True)
+class TestWorld:
+    name: str
+    folder: str
+    seed: int
+    distance_m: float  # meta.json's, to check the rebuilt world is the rendered one
+
+
+def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
+    """The held-out test worlds (meta.json's "split": "test"), in name order, the first `limit`."""
+    found = []
+    for meta_path in sorted(synthetic_dir.glob("*/meta.json")):
+        meta = json.loads(meta_path.read_text())
+        if meta.get("split") == "test":
+            found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), int(meta["seed"]), float(meta["distance_m"])))
+    if not found:
+        raise ValueError(f"{synthetic_dir}: no held-out test world (a meta.json with \"split\": \"test\"); run synthesize")
+    return found[:limit] if limit else found
+
+
+def checkpoint_of(name: str, d, seed: int) -> Path | None:
+    """The checkpoint a policy name needs (d: the drive config; seed: the training seed), None for none."""
+    if name in ("oracle", "straight"):
+        return None
+    if name == "pilotnet":
+        return Path(d.pilotnet_checkpoint)
+    return Path(d.runs_dir) / name.removesuffix(TEMPORAL) / f"seed{seed}" / "checkpoints" / "best.ckpt"
+
+
+def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
+    if name == "oracle":
+        return OraclePolicy(d.lookahead_m)
+    if name == "straight":
+        return StraightPolicy()
+    if name == "pilotnet":
+        from offroad_path.steering.task import SteeringTask
+        from offroad_path.training.checkpoints import load_checkpoint, load_weights
+
+        saved = load_checkpoint(checkpoint_of(name, d, seed))  # weights_only
+        hp = saved["hyper_parameters"]
+        task = SteeringTask(**{k: hp[k] for k in ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")})
+        load_weights(task, checkpoint_of(name, d, seed), saved)
+        return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]))
+    from offroad_path.inference.runners import TorchModel
+
+    model = TorchModel(checkpoint_of(name, d, seed))
+    alpha = d.temporal_alpha if name.endswith(TEMPORAL) else None
+    return PathPolicy(name, model, params, d.lookahead_m, d.threshold, alpha)
+
+
+@dataclass(frozen=True)
+class WorldJob:
+    world: TestWorld
+    world_cfg: object  # the world config node the test worlds were rendered with
+    drive_cfg: object  # the drive config
+    training_seed: int
+    postprocess: PostprocessParams  # sized for the drive's camera
+    disparity: object  # label.disparity
+    out_dir: str  # the stage's temporary output folder
+    video: bool
+
+
+def _geometry(v) -> VehicleGeometry:
+    return VehicleGeometry(**{k: float(v[k]) for k in VehicleGeometry.__dataclass_fields__})
+
+
+def _checked_world(job: WorldJob) -> World:
+    world = build_world(job.world_cfg, job.world.seed)
+    if not math.isclose(path_length(world.poses), job.world.distance_m, rel_tol=1e-9):
+        raise ValueError(f"{job.world.folder}: rendered with another world config than this one "
+                         f"(its drive is {job.world.distance_m:.3f} m, this config's {path_length(world.poses):.3f} m); rerun synthesize")  # fmt: skip
+    return world
+
+
+def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
+    """Every argument's policies from every start in one world: (argument, log) in a fixed order."""
+    cv2.setNumThreads(1)  # one process per core
+    torch.set_num_threads(1)
+    d, world = job.drive_cfg, _checked_world(job)
+    camera = PinholeCamera.from_fov(d.width, d.height, job.world_cfg.hfov_deg)
+    matcher = sgbm(job.disparity)
+    settings = LoopSettings(d.rate_hz, d.speed_mps, d.length_m, d.respawn_m, d.timeout_factor, d.water_intervenes)
+    policies: dict[str, Policy] = {}
+    out: list[tuple[str, DriveLog]] = []
+    for argument, names in d.arguments.items():
+        geometry = _geometry(d.other_vehicle) if argument == "vehicle" else vehicle_geometry(job.world_cfg)
+        vehicle = Vehicle(geometry, d.steering_rate_deg_s)
+        course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m))
+        rig = Camera(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
+        usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)
+        starts = [usable * k / d.starts_per_world for k in range(d.starts_per_world)]
+        logs: dict[str, list[DriveLog]] = {}
+        for name in names:
+            if name not in policies:
+                policies[name] = make_policy(name, d, job.training_seed, job.postprocess)
+            policy = policies[name]
+            for k, start in enumerate(starts):
+                yaw = _yaw_factor(world, job, k) if argument == "traction" else None
+                video = job.video and argument == "steering" and k == 0
+                log = drive(course, policy, vehicle, rig, settings, start, yaw, video)
+                log.world = job.world.name
+                if video:
+                    _write_video(log, Path(job.out_dir) / "videos" / f"{name}.mp4", d.rate_hz)
+                logs.setdefault(name, []).append(log)
+                out.append((argument, log))
+        plot_world(world, course, logs, Path(job.out_dir) / "trajectories" / argument / f"{job.world.name}.png")
+    return out
+
+
+def _yaw_factor(world: World, job: WorldJob, start: int):
+    """The traction argument's yaw-rate factor: world.slip's surfaces and patches, with per-sub-step
+    noise drawn from a generator of the world and start, the same sequence for every policy."""
+    grid = world.material_grid
+    lo = np.array([grid.x0, grid.z0])
+    slip = world.slip or make_slip(job.world_cfg.slip, job.world.seed, lo, lo + np.array(grid.shape[::-1]) * grid.step)
+    rng = np.random.default_rng(np.random.SeedSequence([job.world.seed, SLIP_STREAM, 2, start]))
+
+    def factor(xz: np.ndarray) -> float:
+        here = xz[None]
+        return max(float(slip.factor(world.surface(here), here)[0]) * (1.0 + slip.noise * rng.normal()), 0.05)
+
+    return factor
+
+
+def _write_video(log: DriveLog, path: Path, fps: float) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    h, w = log.frames[0].shape[:2]
+    video = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+    for image in log.frames:
+        video.write(cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    video.release()
+    log.frames = []  # the frames are not sent back to the stage
+
+
+def plot_world(world: World, course: Course, logs: dict[str, list[DriveLog]], path: Path) -> None:
+    """Top down: track and forks, the reference drive, objects in the body's height band, each
+    policy's path, and its interventions (x)."""
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(6, 6), dpi=100)
+    ax.plot(*world.track.xz.T, color="0.75", linewidth=6, solid_capstyle="round", label="track")
+    for fork in world.forks:
+        ax.plot(*fork.xz.T, color="0.85", linewidth=5)
+    ax.plot(*world.drive.xz.T, "k--", linewidth=0.8, label="reference drive")
+    xy = np.array([t for group in logs.values() for g in group for t in g.trajectory])
+    lo, hi = xy.min(axis=0) - 10, xy.max(axis=0) + 10
+    for f in course.footprints:
+        if np.all(f.xz > lo) and np.all(f.xz < hi):
+            ax.add_patch(plt.Circle(tuple(f.xz), f.radius, color="sienna", alpha=0.6))
+    for i, (name, group) in enumerate(logs.items()):
+        colour = f"C{i}"
+        for j, g in enumerate(group):
+            ax.plot(*np.array(g.trajectory).T, color=colour, linewidth=1.2, label=name if j == 0 else None)
+            for x, z, _ in g.interventions:
+                ax.plot(x, z, "x", color=colour, markersize=8, markeredgewidth=2)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, right at the start)")
+    ax.set_ylabel("z (m, forward at the start)")
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def drive_params(postprocess_cfg, drive_width: int, world_width: int) -> PostprocessParams:
+    """The post-processing settings for the drive's camera: the blur's sigma scaled to its width."""
+    params = PostprocessParams.from_config(postprocess_cfg)
+    return replace(params, sigma=params.sigma * drive_width / world_width)
