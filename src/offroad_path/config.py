@@ -420,6 +420,7 @@ class SteeringConfig:
     balance: str = setting(one_of(registry("steering.balance", "BALANCES")))
     lock_deg: float = setting(positive())  # road-wheel angle of normalised steering 1, for errors in degrees
     steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree
+    slip: bool = MISSING  # train on the steering the same drives take on world.slip's ground (train_steering_slip)
     metrics_path: str = MISSING
     plots_path: str = MISSING  # true and predicted steering per test frame
 
@@ -430,7 +431,7 @@ class DriveConfig:
 
     synthetic_dir: str = MISSING
     runs_dir: str = MISSING
-    pilotnet_checkpoint: str | None = MISSING
+    pilotnets: dict[str, str] = field(default_factory=dict)  # end-to-end policy name -> train_steering checkpoint
     out_dir: str = MISSING
     metrics_path: str = MISSING
     arguments: dict[str, list[str]] = field(default_factory=dict)  # steering | vehicle | traction -> policy names
@@ -444,6 +445,7 @@ class DriveConfig:
     steering_rate_deg_s: float = setting(positive())
     corridor_m: float = setting(positive())
     body_band_m: tuple[float, float] = MISSING
+    foliage_is_obstacle: bool = MISSING
     water_intervenes: bool = MISSING
     respawn_m: float = setting(positive())
     intervention_s: float = setting(positive())

@@ -18,7 +18,7 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from offroad_path.driving.loop import DriveLog
-from offroad_path.driving.report import ARGUMENTS, finding, score, table, versus_pilotnet
+from offroad_path.driving.report import ARGUMENTS, comparison_table, finding, score, table, versus_end_to_end
 from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, WorldJob, checkpoint_of, drive_params, drive_world, test_worlds
 from offroad_path.evaluation.bootstrap import Resampling
 from offroad_path.stage import hydra_stage, reads
@@ -32,7 +32,7 @@ log = logging.getLogger("offroad_path.drive")
 
 def outputs(cfg: DictConfig) -> Outputs:
     d = cfg.drive
-    inputs = [d.synthetic_dir, d.runs_dir, d.pilotnet_checkpoint]
+    inputs = [d.synthetic_dir, d.runs_dir, *d.pilotnets.values()]
     return Outputs("drive", folders={"drive.out_dir": d.out_dir}, files={"drive.metrics_path": d.metrics_path}, inputs=inputs)
 
 
@@ -42,12 +42,14 @@ def check_policies(d: DictConfig, seed: int) -> None:
         raise ValueError(f"drive.arguments: unknown argument {unknown[0]!r} (arguments: {', '.join(ARGUMENTS)})")
     for argument, names in d.arguments.items():
         for name in names:
-            if name.removesuffix(TEMPORAL) in BUILT_IN and name not in BUILT_IN:
+            base = name.removesuffix(TEMPORAL)
+            if name != base and (base in BUILT_IN or base in d.pilotnets):
                 raise ValueError(f"drive.arguments.{argument}: {name!r}: the temporal filter is for path networks only")
             checkpoint = checkpoint_of(name, d, seed)
             if checkpoint is not None and not checkpoint.is_file():
+                known = ", ".join([*d.pilotnets, *BUILT_IN])
                 raise FileNotFoundError(f"drive.arguments.{argument}: policy {name!r} needs {checkpoint}, which does not exist "
-                                        f"(a run name of the train stage, {TEMPORAL} after one, or one of {', '.join(BUILT_IN)})")  # fmt: skip
+                                        f"(policies: a run name of the train stage, that name{TEMPORAL}, or {known})")  # fmt: skip
 
 
 @reads("drive", "world", "postprocess", "label", "mlflow", writes=outputs)
@@ -55,6 +57,9 @@ def run_drive(cfg: DictConfig) -> dict:
     d = cfg.drive
     check_policies(d, cfg.seed)
     worlds = test_worlds(Path(d.synthetic_dir), d.worlds)
+    if len(worlds) * d.starts_per_world < 2:
+        raise ValueError(f"drive.starts_per_world: {len(worlds)} test world(s) x {d.starts_per_world} start(s) is one drive; "
+                         "intervals need at least 2 (more starts, or more test worlds)")  # fmt: skip
     params = drive_params(cfg.postprocess, d.width, cfg.world.width)
     resampling = Resampling(d.bootstrap.resamples, d.bootstrap.seed, d.bootstrap.level)
     started = time.perf_counter()
@@ -72,12 +77,13 @@ def run_drive(cfg: DictConfig) -> dict:
                                  f"from every centre line, or into an object{', or into water' if d.water_intervenes else ''}.\n"]  # fmt: skip
         for argument, by_policy in logs.items():
             scores = [score(group, d.intervention_s, resampling) for group in by_policy.values()]
-            comparisons = versus_pilotnet(by_policy, resampling)
-            sentence = finding(scores, comparisons)
+            comparisons = versus_end_to_end(by_policy, list(d.pilotnets), resampling)
+            sentence = finding(comparisons)
             metrics[argument] = {"policies": {s.policy: s.as_dict() for s in scores},
-                                 "versus_pilotnet": {n: {"value": i.estimate, "low": i.low, "high": i.high} for n, i in comparisons.items()},
+                                 "path_minus_end_to_end": {f"{a} - {b}": {"value": i.estimate, "low": i.low, "high": i.high}
+                                                           for (a, b), i in comparisons.items()},
                                  "finding": sentence}  # fmt: skip
-            sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores, comparisons)}\n\n{sentence}\n")
+            sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores)}\n\n{comparison_table(comparisons)}\n\n{sentence}\n")
         metrics["drives"] = {"worlds": [w.name for w in worlds], "starts_per_world": d.starts_per_world, "length_m": d.length_m}
         (tmp / "results.md").write_text("".join(sections))
         (tmp / "drive.json").write_text(json.dumps(metrics, indent=2) + "\n")

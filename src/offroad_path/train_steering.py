@@ -2,6 +2,7 @@
 of the training sequences, tested on the path split's held-out stretches (see offroad_path.steering).
 
     python -m offroad_path.train_steering [steering.lr=2e-4] [steering.max_epochs=30]
+    python -m offroad_path.train_steering steering.slip=true steering.out_dir=data/steering_slip ...  # on slippery ground
 
 Writes steering.out_dir (data/steering): checkpoints/best.ckpt, metrics.json, predictions.csv (true
 and predicted angle per test frame), error_by_magnitude.csv, scatter.png (the thesis's Fig. 5.4);
@@ -20,7 +21,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from offroad_path.data.labels import label_run_folders
+from offroad_path.data.labels import label_run_folders, read_label_run
 from offroad_path.data.manifest import manifest_folders
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.steering.dataset import SteeringDataModule
@@ -51,17 +52,31 @@ def outputs(cfg: DictConfig) -> Outputs:
     return Outputs("train_steering", folders={"steering.out_dir": s.out_dir}, files=files, inputs=inputs)
 
 
-@reads("steering", "split", "trainer", "callbacks", "logger", "mlflow", writes=outputs)
+def slippery_steering(cfg: DictConfig) -> dict[str, np.ndarray]:
+    """Each labelled synthetic sequence's steering had it been driven on world.slip's ground: the
+    driver's input that made the same motion (offroad_path.world.record.steering_under_slip)."""
+    from offroad_path.world.record import steering_under_slip  # the world and its renderer, only for this
+    folders = [run.sequence.root for run in read_label_run(Path(cfg.steering.labels_dir)) if run.sequence.meta.get("generator") == "offroad_path.world"]
+    if not folders:
+        raise ValueError(f"steering.slip: {cfg.steering.labels_dir} labels no rendered sequence, whose world could be driven with slip")
+    log.info("steering under slip (world.slip) for %d rendered sequences", len(folders))
+    return steering_under_slip(cfg.world, folders)
+
+
+@reads("steering", "split", "world", "trainer", "callbacks", "logger", "mlflow", writes=outputs)
 def train_steering(cfg: DictConfig) -> dict:
     s = cfg.steering
     L.seed_everything(cfg.seed, workers=True)
     # The frames follow the path split's blocks of driving, with its guard (conf/split).
-    parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror)
+    angles = slippery_steering(cfg) if s.slip else None
+    parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror, angles)
     data = SteeringDataModule(parts, s, cfg.seed)
     task = SteeringTask.from_config(s)
-    outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb")
+    outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")
     settings = {"block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,
                 "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs}}  # fmt: skip
+    if s.slip:
+        settings["slip"] = OmegaConf.to_container(cfg.world.slip)
     files = [Path(s.split_dir) / f"{part}.csv" for part in PARTS] + [Path(s.labels_dir) / "summary.json"]
     scored: dict[str, np.ndarray] = {}
 
@@ -84,7 +99,7 @@ def train_steering(cfg: DictConfig) -> dict:
     spec = RunSpec(stage="train_steering", out_dir=Path(s.out_dir), out_key="steering.out_dir",
                    key=run_identity(cfg, "train_steering", settings, files), max_epochs=s.max_epochs, patience=s.patience,
                    write_more=write_predictions)  # fmt: skip
-    tags = {"stage": "train_steering", "model": "pilotnet"}
+    tags = {"stage": "train_steering", "model": "pilotnet", "slip": str(s.slip).lower()}
     logger = training_logger(cfg, "train_steering pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
     results = fit(cfg, task, data, spec, logger)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}

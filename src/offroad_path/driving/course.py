@@ -5,7 +5,8 @@ the training images).
 The corridor is every point within `corridor_m` of a centre line: the track's, any fork's, or the
 reference drive's (a detour across grass that the driver took is drivable too). The body is the
 vehicle's footprint rectangle; an object is hit when its cross-section at the body's height band
-(above ground) overlaps it. Water counts where a wheel touches it.
+(above ground) overlaps it; tree crowns and bushes only when foliage counts (drive.foliage_is_obstacle).
+Water counts where a wheel touches it.
 """
 
 from __future__ import annotations
@@ -37,12 +38,13 @@ def _band_overlap(bottom: float, top: float, band: tuple[float, float]) -> bool:
     return bottom < band[1] and top > band[0]
 
 
-def footprints(objects, ground_y, band: tuple[float, float]) -> list[Footprint]:
+def footprints(objects, ground_y, band: tuple[float, float], foliage: bool) -> list[Footprint]:
     """Cross-sections of `objects` (world.objects.arrays()) between band[0] and band[1] metres above
-    the ground (ground_y: (x, z) -> the ground's y, down-positive)."""
+    the ground (ground_y: (x, z) -> the ground's y, down-positive). The world's spheres are tree
+    crowns and bushes: with foliage False they are brushed through, not hit."""
     out = []
     for kind, p in zip(objects.kind, objects.params, strict=True):
-        if kind == SPHERE:
+        if kind == SPHERE and foliage:
             cx, cy, cz, r = p[:4]
             centre = ground_y(cx, cz) - cy  # height of the centre above the ground
             nearest = float(np.clip(centre, *band))
@@ -66,13 +68,16 @@ def _rectangle_axes(heading: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array([math.cos(heading), -math.sin(heading)]), np.array([math.sin(heading), math.cos(heading)])
 
 
-def _box_overlaps(a_xz, a_half, a_heading, b_xz, b_half, b_heading) -> bool:
-    """Separating-axis test of two rectangles (centre, (half width, half length), heading)."""
-    a_axes, b_axes = _rectangle_axes(a_heading), _rectangle_axes(b_heading)
-    d = b_xz - a_xz
+Rectangle = tuple[np.ndarray, tuple[float, float], float]  # centre (2,), half-extents along its (right, forward), heading
+
+
+def _boxes_overlap(a: Rectangle, b: Rectangle) -> bool:
+    """Separating-axis test of two rectangles."""
+    a_axes, b_axes = _rectangle_axes(a[2]), _rectangle_axes(b[2])
+    d = b[0] - a[0]
     for axis in (*a_axes, *b_axes):
-        ra = sum(h * abs(axis @ u) for h, u in zip(a_half, a_axes, strict=True))
-        rb = sum(h * abs(axis @ u) for h, u in zip(b_half, b_axes, strict=True))
+        ra = sum(h * abs(axis @ u) for h, u in zip(a[1], a_axes, strict=True))
+        rb = sum(h * abs(axis @ u) for h, u in zip(b[1], b_axes, strict=True))
         if abs(d @ axis) > ra + rb:
             return False
     return True
@@ -81,7 +86,7 @@ def _box_overlaps(a_xz, a_half, a_heading, b_xz, b_half, b_heading) -> bool:
 class Course:
     """One world's corridor, objects and water for a vehicle of `geometry`, and the reference drive."""
 
-    def __init__(self, world, geometry: VehicleGeometry, corridor_m: float, band_m: tuple[float, float]):
+    def __init__(self, world, geometry: VehicleGeometry, corridor_m: float, band_m: tuple[float, float], foliage: bool = False):
         self.world, self.geometry, self.corridor_m = world, geometry, corridor_m
         self.reference: Curve = world.drive
         lines = [world.track.xz, world.drive.xz, *(fork.xz for fork in world.forks)]
@@ -91,7 +96,7 @@ class Course:
         def ground_y(x: float, z: float) -> float:
             return -float(world.terrain.elevation(np.array([x]), np.array([z]))[0])
 
-        self.footprints = footprints(world.objects.arrays(), ground_y, band_m)
+        self.footprints = footprints(world.objects.arrays(), ground_y, band_m, foliage)
         self._objects = cKDTree(np.array([f.xz for f in self.footprints])) if self.footprints else None
         self._reach = max((f.radius for f in self.footprints), default=0.0) + math.hypot(geometry.width_m, geometry.length_m) / 2
 
@@ -140,14 +145,15 @@ class Course:
             for centre in centres:
                 for k in self._objects.query_ball_point(centre, self._reach):
                     f = self.footprints[k]
-                    hit = (_box_overlaps(centre, half, heading, f.xz, f.half, f.yaw) if f.half is not None
-                           else _disc_overlaps(centre, half, heading, f.xz, f.radius))  # fmt: skip
+                    body = (centre, half, heading)
+                    hit = _boxes_overlap(body, (f.xz, f.half, f.yaw)) if f.half is not None else _disc_overlaps(body, f.xz, f.radius)
                     if hit:
                         return "object"
         return None
 
 
-def _disc_overlaps(centre: np.ndarray, half: tuple[float, float], heading: float, disc: np.ndarray, radius: float) -> bool:
+def _disc_overlaps(body: Rectangle, disc: np.ndarray, radius: float) -> bool:
+    centre, half, heading = body
     right, forward = _rectangle_axes(heading)
     d = disc - centre
     local = np.array([d @ right, d @ forward])

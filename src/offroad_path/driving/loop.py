@@ -16,7 +16,7 @@ import numpy as np
 
 from offroad_path.driving.course import Course
 from offroad_path.driving.policies import Camera, Frame, Policy
-from offroad_path.driving.vehicle import State, Vehicle, YawFactor, advance
+from offroad_path.driving.vehicle import State, Vehicle, advance
 from offroad_path.viz import overlay
 
 
@@ -43,7 +43,7 @@ class DriveLog:
     no_path: int = 0  # steps the policy said nothing (steered straight)
     water_entries: int = 0  # times a wheel went from dry ground into water
     offsets: list[float] = field(default_factory=list)  # per step, metres from the nearest centre line
-    trajectory: list[tuple[float, float]] = field(default_factory=list)  # body centre per step
+    trajectory: list[tuple[float, float]] = field(default_factory=list)  # body centre per step, NaN after an intervention
     interventions: list[tuple[float, float, str]] = field(default_factory=list)  # (x, z, why)
     frames: list[np.ndarray] = field(default_factory=list)  # the video's images, when recorded
 
@@ -53,9 +53,19 @@ def start_state(course: Course, s: float) -> State:
     return State(xz=xz, heading=heading, steer=0.0)
 
 
-def drive(course: Course, policy: Policy, vehicle: Vehicle, rig: Camera, settings: LoopSettings, start_s: float,
-          yaw_factor: YawFactor | None = None, video: bool = False) -> DriveLog:  # fmt: skip
+@dataclass(frozen=True)
+class Setup:
+    """Where and with what a drive happens: the world's course, the vehicle, its camera, the loop's settings."""
+
+    course: Course
+    vehicle: Vehicle
+    rig: Camera | None  # None: no policy looks (oracle, straight) and no video
+    settings: LoopSettings
+
+
+def drive(setup: Setup, policy: Policy, start_s: float, video: bool = False) -> DriveLog:
     """One drive of `policy` from arc length start_s of the reference drive."""
+    course, vehicle, rig, settings = setup.course, setup.vehicle, setup.rig, setup.settings
     log = DriveLog(policy.name, "", start_s)
     dt = 1.0 / settings.rate_hz
     end_s = min(start_s + settings.length_m, course.length_m - settings.respawn_m)
@@ -69,7 +79,7 @@ def drive(course: Course, policy: Policy, vehicle: Vehicle, rig: Camera, setting
         log.no_path += command is None
         if video:
             log.frames.append(_video_frame(frame, policy, command))
-        state, centres = advance(state, vehicle, 0.0 if command is None else command, settings.speed_mps, dt, yaw_factor)
+        state, centres = advance(state, vehicle, 0.0 if command is None else command, settings.speed_mps, dt)
         log.elapsed_s += dt
         log.distance_m += settings.speed_mps * dt
         log.steps += 1
@@ -85,6 +95,7 @@ def drive(course: Course, policy: Policy, vehicle: Vehicle, rig: Camera, setting
             why = "water"
         if why is not None:
             log.interventions.append((float(state.xz[0]), float(state.xz[1]), why))
+            log.trajectory.append((float("nan"), float("nan")))  # the vehicle is moved: a gap in its line
             s = farthest = farthest + settings.respawn_m
             state, wet = start_state(course, s), False
             policy.reset()

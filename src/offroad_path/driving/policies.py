@@ -112,7 +112,7 @@ class PilotNetPolicy(Policy):
     task: torch.nn.Module  # SteeringTask, eval mode
     width: int
     height: int
-    name: str = "pilotnet"
+    name: str = "pilotnet"  # drive.pilotnets' key
 
     def steer(self, frame: Frame) -> float | None:
         image = cv2.resize(frame.left, (self.width, self.height), interpolation=cv2.INTER_LINEAR)

@@ -85,40 +85,37 @@ def score(logs: list[DriveLog], intervention_s: float, resampling: Resampling) -
     )
 
 
-def versus_pilotnet(logs: dict[str, list[DriveLog]], resampling: Resampling) -> dict[str, Interval]:
-    """Each path policy's interventions per km minus PilotNet's, paired on the same drives."""
-    if "pilotnet" not in logs:
-        return {}
-    base = sums(logs["pilotnet"])
-    return {name: paired_interval(sums(g), base, _per_km, resampling)
-            for name, g in logs.items() if name not in ("pilotnet", "oracle", "straight")}  # fmt: skip
+def versus_end_to_end(logs: dict[str, list[DriveLog]], end_to_end: list[str], resampling: Resampling) -> dict[tuple[str, str], Interval]:
+    """{(path policy, PilotNet policy): path's interventions per km minus PilotNet's}, paired on the same drives."""
+    pilots = [name for name in logs if name in end_to_end]
+    paths = [name for name in logs if name not in end_to_end and name not in ("oracle", "straight")]
+    return {(a, b): paired_interval(sums(logs[a]), sums(logs[b]), _per_km, resampling) for b in pilots for a in paths}
 
 
-def table(scores: list[PolicyScore], comparisons: dict[str, Interval]) -> str:
+def table(scores: list[PolicyScore]) -> str:
     """A markdown table, one row per policy."""
-    head = ("| policy | distance (m) | interventions | per km [95 % CI] | autonomy % [95 % CI] | mean offset (m) | "
-            "95th pct offset (m) | water entries per km | steps without a path | - PilotNet, per km [95 % CI] |")  # fmt: skip
-    rows = [head, "|" + " --- |" * 10]
+    rows = ["| policy | distance (m) | interventions | per km [95 % CI] | autonomy % [95 % CI] | mean offset (m) [95 % CI] | "
+            "95th pct offset (m) [95 % CI] | water entries per km | steps without a path |", "|" + " --- |" * 9]  # fmt: skip
     for p in scores:
-        versus = comparisons[p.policy].difference_text(1) if p.policy in comparisons else ""
         rows.append(f"| {p.policy} | {p.distance_m:.0f} | {p.interventions} | {p.per_km.text(1)} | {p.autonomy_pct.text(1)} | "
-                    f"{p.mean_offset_m.text(2)} | {p.p95_offset_m.text(2)} | {p.water_per_km:.1f} | {p.no_path_steps} | {versus} |")  # fmt: skip
+                    f"{p.mean_offset_m.text(2)} | {p.p95_offset_m.text(2)} | {p.water_per_km:.1f} | {p.no_path_steps} |")  # fmt: skip
     return "\n".join(rows)
 
 
-def finding(scores: list[PolicyScore], comparisons: dict[str, Interval]) -> str:
-    """One sentence: whether the path networks beat PilotNet, with the paired intervals."""
+def comparison_table(comparisons: dict[tuple[str, str], Interval]) -> str:
+    rows = ["| path policy | end to end | interventions per km, path - end to end [95 % CI] |", "| --- | --- | --- |"]
+    rows += [f"| {a} | {b} | {i.difference_text(2)} |" for (a, b), i in comparisons.items()]
+    return "\n".join(rows)
+
+
+def finding(comparisons: dict[tuple[str, str], Interval]) -> str:
+    """One sentence: which path policies needed fewer or more interventions per km than which
+    end-to-end policy, by paired intervals that exclude 0; or that no difference was measured."""
     if not comparisons:
-        return "No PilotNet policy was driven: no comparison."
-    better = [n for n, i in comparisons.items() if i.high < 0]
-    worse = [n for n, i in comparisons.items() if i.low > 0]
-    parts = [f"{n} {i.difference_text(1)}" for n, i in comparisons.items()]
-    if better and not worse:
-        verdict = f"{', '.join(better)} needed fewer interventions per km than PilotNet"
-    elif worse and not better:
-        verdict = f"{', '.join(worse)} needed more interventions per km than PilotNet"
-    elif better:
-        verdict = f"{', '.join(better)} needed fewer and {', '.join(worse)} more interventions per km than PilotNet"
-    else:
-        verdict = "no difference in interventions per km from PilotNet was measured"
-    return f"{verdict} (path policy - PilotNet, per km: {'; '.join(parts)})."
+        return "No end-to-end policy was driven: no comparison."
+    better = [f"{a} than {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.high < 0]
+    worse = [f"{a} than {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.low > 0]
+    same = [f"{a} and {b}" for (a, b), i in comparisons.items() if i.contains_zero]
+    parts = ([f"fewer interventions: {'; '.join(better)}"] if better else []) + ([f"more: {'; '.join(worse)}"] if worse else [])
+    parts += [f"no difference measured between {', '.join(same)}"] if same else []
+    return "Path prediction + pure pursuit against end-to-end steering, paired on the same drives: " + "; ".join(parts) + "."

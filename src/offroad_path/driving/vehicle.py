@@ -24,10 +24,14 @@ from offroad_path.world.trajectory import VehicleGeometry
 SUBSTEP_M = 0.1  # the arc of one sub-step: collisions are checked at every one
 
 
+YawFactor = Callable[[np.ndarray], float]  # body centre (2,) -> the ground's yaw-rate factor there
+
+
 @dataclass(frozen=True)
 class Vehicle:
     geometry: VehicleGeometry
     steering_rate_deg_s: float  # road wheels
+    yaw_factor: YawFactor | None = None  # traction (offroad_path.world.slip); None: the bicycle model exactly
 
     @property
     def lock_rad(self) -> float:
@@ -60,11 +64,7 @@ class State:
         return np.stack([rel @ self.right, rel @ self.forward], axis=1)
 
 
-YawFactor = Callable[[np.ndarray], float]  # body centre (2,) -> yaw-rate factor there
-
-
-def advance(state: State, vehicle: Vehicle, command: float, speed_mps: float, dt_s: float,
-            yaw_factor: YawFactor | None = None) -> tuple[State, np.ndarray]:  # fmt: skip
+def advance(state: State, vehicle: Vehicle, command: float, speed_mps: float, dt_s: float) -> tuple[State, np.ndarray]:
     """The state after one control period of dt_s with the road wheels steered toward `command`
     (radians), and the body centre after every sub-step (n, 2)."""
     g = vehicle.geometry
@@ -79,7 +79,7 @@ def advance(state: State, vehicle: Vehicle, command: float, speed_mps: float, dt
     centres = np.empty((n, 2))
     for i in range(n):
         steer += float(np.clip(target - steer, -max_turn, max_turn))
-        factor = 1.0 if yaw_factor is None else yaw_factor(rear + half * np.array([math.sin(heading), math.cos(heading)]))
+        factor = 1.0 if vehicle.yaw_factor is None else vehicle.yaw_factor(rear + half * np.array([math.sin(heading), math.cos(heading)]))
         turn = speed_mps * math.tan(steer) / g.wheelbase_m * factor * h
         mid = heading + turn / 2
         rear = rear + speed_mps * h * np.array([math.sin(mid), math.cos(mid)])

@@ -6,7 +6,6 @@ first world, a video per policy). One world is one job of the drive stage's work
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -16,20 +15,20 @@ import numpy as np
 import torch
 
 from offroad_path.driving.course import Course
-from offroad_path.driving.loop import DriveLog, LoopSettings, drive
+from offroad_path.driving.loop import DriveLog, LoopSettings, Setup, drive
 from offroad_path.driving.policies import Camera, OraclePolicy, PathPolicy, PilotNetPolicy, Policy, StraightPolicy
 from offroad_path.driving.vehicle import Vehicle
-from offroad_path.geometry.path import path_length
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.postprocessing import PostprocessParams
+from offroad_path.world.record import rebuild_world
 from offroad_path.world.render import PinholeCamera
-from offroad_path.world.scene import World, build_world, vehicle_geometry
+from offroad_path.world.scene import World, vehicle_geometry
 from offroad_path.world.slip import SLIP_STREAM, make_slip
 from offroad_path.world.trajectory import VehicleGeometry
 
 matplotlib.use("Agg")
 TEMPORAL = "+temporal"
-BUILT_IN = ("pilotnet", "oracle", "straight")
+BUILT_IN = ("oracle", "straight")
 END_MARGIN_M = 30.0  # starts leave this much reference drive beyond a drive's end, for the pursuit's look-ahead
 
 
@@ -38,7 +37,6 @@ class TestWorld:
     name: str
     folder: str
     seed: int
-    distance_m: float  # meta.json's, to check the rebuilt world is the rendered one
 
 
 def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
@@ -47,7 +45,7 @@ def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
     for meta_path in sorted(synthetic_dir.glob("*/meta.json")):
         meta = json.loads(meta_path.read_text())
         if meta.get("split") == "test":
-            found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), int(meta["seed"]), float(meta["distance_m"])))
+            found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), int(meta["seed"])))
     if not found:
         raise ValueError(f"{synthetic_dir}: no held-out test world (a meta.json with \"split\": \"test\"); run synthesize")
     return found[:limit] if limit else found
@@ -57,8 +55,8 @@ def checkpoint_of(name: str, d, seed: int) -> Path | None:
     """The checkpoint a policy name needs (d: the drive config; seed: the training seed), None for none."""
     if name in ("oracle", "straight"):
         return None
-    if name == "pilotnet":
-        return Path(d.pilotnet_checkpoint)
+    if name in d.pilotnets:
+        return Path(d.pilotnets[name])
     return Path(d.runs_dir) / name.removesuffix(TEMPORAL) / f"seed{seed}" / "checkpoints" / "best.ckpt"
 
 
@@ -67,7 +65,7 @@ def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
         return OraclePolicy(d.lookahead_m)
     if name == "straight":
         return StraightPolicy()
-    if name == "pilotnet":
+    if name in d.pilotnets:
         from offroad_path.steering.task import SteeringTask
         from offroad_path.training.checkpoints import load_checkpoint, load_weights
 
@@ -75,7 +73,7 @@ def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
         hp = saved["hyper_parameters"]
         task = SteeringTask(**{k: hp[k] for k in ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")})
         load_weights(task, checkpoint_of(name, d, seed), saved)
-        return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]))
+        return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]), name)
     from offroad_path.inference.runners import TorchModel
 
     model = TorchModel(checkpoint_of(name, d, seed))
@@ -99,19 +97,11 @@ def _geometry(v) -> VehicleGeometry:
     return VehicleGeometry(**{k: float(v[k]) for k in VehicleGeometry.__dataclass_fields__})
 
 
-def _checked_world(job: WorldJob) -> World:
-    world = build_world(job.world_cfg, job.world.seed)
-    if not math.isclose(path_length(world.poses), job.world.distance_m, rel_tol=1e-9):
-        raise ValueError(f"{job.world.folder}: rendered with another world config than this one "
-                         f"(its drive is {job.world.distance_m:.3f} m, this config's {path_length(world.poses):.3f} m); rerun synthesize")  # fmt: skip
-    return world
-
-
 def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
     """Every argument's policies from every start in one world: (argument, log) in a fixed order."""
     cv2.setNumThreads(1)  # one process per core
     torch.set_num_threads(1)
-    d, world = job.drive_cfg, _checked_world(job)
+    d, world = job.drive_cfg, rebuild_world(job.world_cfg, Path(job.world.folder))
     camera = PinholeCamera.from_fov(d.width, d.height, job.world_cfg.hfov_deg)
     matcher = sgbm(job.disparity)
     settings = LoopSettings(d.rate_hz, d.speed_mps, d.length_m, d.respawn_m, d.timeout_factor, d.water_intervenes)
@@ -119,8 +109,7 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
     out: list[tuple[str, DriveLog]] = []
     for argument, names in d.arguments.items():
         geometry = _geometry(d.other_vehicle) if argument == "vehicle" else vehicle_geometry(job.world_cfg)
-        vehicle = Vehicle(geometry, d.steering_rate_deg_s)
-        course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m))
+        course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
         rig = Camera(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
         usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)
         starts = [usable * k / d.starts_per_world for k in range(d.starts_per_world)]
@@ -131,8 +120,9 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
             policy = policies[name]
             for k, start in enumerate(starts):
                 yaw = _yaw_factor(world, job, k) if argument == "traction" else None
+                setup = Setup(course, Vehicle(geometry, d.steering_rate_deg_s, yaw), rig, settings)
                 video = job.video and argument == "steering" and k == 0
-                log = drive(course, policy, vehicle, rig, settings, start, yaw, video)
+                log = drive(setup, policy, start, video)
                 log.world = job.world.name
                 if video:
                     _write_video(log, Path(job.out_dir) / "videos" / f"{name}.mp4", d.rate_hz)
@@ -179,7 +169,7 @@ def plot_world(world: World, course: Course, logs: dict[str, list[DriveLog]], pa
         ax.plot(*fork.xz.T, color="0.85", linewidth=5)
     ax.plot(*world.drive.xz.T, "k--", linewidth=0.8, label="reference drive")
     xy = np.array([t for group in logs.values() for g in group for t in g.trajectory])
-    lo, hi = xy.min(axis=0) - 10, xy.max(axis=0) + 10
+    lo, hi = np.nanmin(xy, axis=0) - 10, np.nanmax(xy, axis=0) + 10
     for f in course.footprints:
         if np.all(f.xz > lo) and np.all(f.xz < hi):
             ax.add_patch(plt.Circle(tuple(f.xz), f.radius, color="sienna", alpha=0.6))

@@ -30,8 +30,10 @@ class SteeringFrame:
     mirrored: bool = False
 
 
-def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: float, mirror: bool) -> dict[str, list[SteeringFrame]]:
-    """{'train', 'val', 'test'}: frames of every labelled sequence that has steering.txt."""
+def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: float, mirror: bool,
+                   steering: dict[str, np.ndarray] | None = None) -> dict[str, list[SteeringFrame]]:  # fmt: skip
+    """{'train', 'val', 'test'}: frames of every labelled sequence that has steering.txt (or, with
+    `steering`, an angle per frame by sequence name in place of steering.txt's)."""
     runs = read_label_run(labels_dir)
     held_out_part = {}  # (sequence, f0) -> 'val' | 'test'
     for part in ("val", "test"):
@@ -41,7 +43,8 @@ def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: f
     skipped, guarded = [], 0
     for run in runs:
         name, seq = run.name, run.sequence
-        if seq.steering is None:
+        angles = seq.steering if steering is None else steering.get(name)
+        if angles is None:
             skipped.append(name)
             continue
         at = run.distance()
@@ -53,7 +56,7 @@ def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: f
             if part == "train" and len(held) and np.abs(held - at[i]).min() < guard_m:
                 guarded += 1
                 continue
-            frame = SteeringFrame(name, i, str(seq.left[i]), float(seq.steering[i]))
+            frame = SteeringFrame(name, i, str(seq.left[i]), float(angles[i]))
             parts[part].append(frame)
             if mirror:
                 parts[part].append(SteeringFrame(name, i, frame.image, -frame.steering, mirrored=True))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -22,7 +23,7 @@ from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.conditions import conditions_csv, frame_conditions
 from offroad_path.world.render import PinholeCamera, render_view
-from offroad_path.world.scene import build_world
+from offroad_path.world.scene import World, build_world
 
 log = logging.getLogger(__name__)
 
@@ -125,3 +126,30 @@ def record_sequences(cfg: WorldConfig, drives: list[tuple[str, int, bool]], out_
     frames = sum(s["frames"] for s in summaries)
     log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", len(drives), frames, elapsed, frames / elapsed)
     return summaries
+
+
+def rebuild_world(cfg: WorldConfig, folder: Path) -> World:
+    """The world a rendered sequence (folder, with its meta.json) was drawn from, rebuilt from its seed
+    with `cfg`; a ValueError naming the folder when cfg is not the config it was rendered with."""
+    meta = json.loads((folder / "meta.json").read_text())
+    world = build_world(cfg, int(meta["seed"]))
+    if not math.isclose(path_length(world.poses), float(meta["distance_m"]), rel_tol=1e-9):
+        raise ValueError(f"{folder}: rendered with another world config than this one (its drive is {meta['distance_m']:.3f} m, "
+                         f"this config's {path_length(world.poses):.3f} m); rerun synthesize")  # fmt: skip
+    return world
+
+
+def _slip_steering_job(args: tuple[WorldConfig, str]) -> np.ndarray:
+    cv2.setNumThreads(1)
+    cfg, folder = args
+    return rebuild_world(cfg, Path(folder)).steering
+
+
+def steering_under_slip(cfg: WorldConfig, folders: list[Path], workers: int = 0) -> dict[str, np.ndarray]:
+    """{sequence name: steering (frames,)}: what each rendered sequence's steering.txt would hold had
+    it been synthesised with world.slip on (cfg.slip's factors): the driver's input that made the same
+    true motion on slippery ground. The images, poses and so the path labels are the same either way."""
+    slippery = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True) if OmegaConf.is_config(cfg) else asdict(cfg))
+    slippery.slip.enabled = True
+    steering = map_processes(_slip_steering_job, [(slippery, str(f)) for f in folders], workers, [f"sequence {f}" for f in folders])
+    return {f.name: s for f, s in zip(folders, steering, strict=True)}

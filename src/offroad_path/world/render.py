@@ -116,7 +116,8 @@ def _march(terrain: Terrain, origin: tuple, idx: np.ndarray, per_ray: list[np.nd
         # sinks to that height) in one step.
         for level, reach_flat in enumerate(per_ray[6:]):
             headroom = -y - terrain.max_within_at_cells(level, fx, fz)
-            reach = np.minimum(reach_flat, headroom * sink)
+            with np.errstate(invalid="ignore"):  # 0 headroom x infinite sink: NaN, masked by `where` below
+                reach = np.minimum(reach_flat, headroom * sink)
             np.maximum(step, reach, out=step, where=headroom > 0)
         t_prev, c_prev = t, c
         t = t + step

@@ -1,0 +1,104 @@
+"""The drive stage end to end on a small rendered test world: a trained path network, PilotNet and
+the built-in policies driven through every argument, the outputs of its contract, the same metrics
+from the same inputs, and bad input refused before anything is written."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from offroad_path.drive import run_drive
+from offroad_path.steering.task import SteeringTask
+
+SMALL_WORLD = ("world.frames=30", "world.width=128", "world.height=72")
+
+
+@pytest.fixture(scope="module")
+def inputs(compose_config, trained, tmp_path_factory) -> Path:
+    """A folder with synthetic/test_000 (a held-out world), runs/unet-none/seed0 (the tiny U-Net)
+    and pilotnet.ckpt (an untrained PilotNet, saved as train_steering saves one)."""
+    from offroad_path.world.record import record_sequence
+
+    root = tmp_path_factory.mktemp("drive_inputs")
+    record_sequence(compose_config(*SMALL_WORLD).world, seed=5, out_dir=root / "synthetic" / "test_000", held_out=True)
+    checkpoint = root / "runs" / "unet-none" / "seed0" / "checkpoints" / "best.ckpt"
+    checkpoint.parent.mkdir(parents=True)
+    shutil.copy(trained[0], checkpoint)
+    hp = {"width": 96, "height": 66, "lr": 0.01, "lr_step_epochs": 5, "lr_gamma": 0.5, "momentum": 0.9, "weight_decay": 0.0}
+    torch.manual_seed(0)
+    torch.save({"hyper_parameters": hp, "state_dict": SteeringTask(**hp).state_dict()}, root / "pilotnet.ckpt")
+    return root
+
+
+def overrides(inputs: Path, out: Path) -> list[str]:
+    return [*SMALL_WORLD, f"synthesize.out_dir={inputs / 'synthetic'}", f"evaluate.runs_dir={inputs / 'runs'}",
+            f"drive.pilotnets.pilotnet={inputs / 'pilotnet.ckpt'}", f"drive.pilotnets.pilotnet_slip={inputs / 'pilotnet.ckpt'}",
+            "drive.arguments.steering=[unet-none,unet-none+temporal,pilotnet,oracle,straight]",
+            "drive.arguments.vehicle=[unet-none,pilotnet]", "drive.arguments.traction=[unet-none,pilotnet_slip,oracle]",
+            "drive.length_m=8", "drive.starts_per_world=2", "drive.width=128", "drive.height=72", "drive.bootstrap.resamples=100", "drive.workers=1",
+            f"drive.out_dir={out / 'drive'}", f"drive.metrics_path={out / 'drive.json'}",
+            f"mlflow.tracking_uri=sqlite:///{out / 'mlflow.db'}"]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def driven(compose_config, inputs, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("driven")
+    run_drive(compose_config(*overrides(inputs, out)))
+    return out
+
+
+def test_outputs_follow_the_contract(driven):
+    drive_dir = driven / "drive"
+    metrics = json.loads((driven / "drive.json").read_text())
+    assert json.loads((drive_dir / "drive.json").read_text()) == metrics
+    assert metrics["drives"] == {"worlds": ["test_000"], "starts_per_world": 2, "length_m": 8.0}
+    assert list(metrics["steering"]["policies"]) == ["unet-none", "unet-none+temporal", "pilotnet", "oracle", "straight"]
+    assert list(metrics["traction"]["path_minus_end_to_end"]) == ["unet-none - pilotnet_slip"]
+    for argument in ("steering", "vehicle", "traction"):
+        assert (drive_dir / "trajectories" / argument / "test_000.png").stat().st_size > 1000
+        for policy in metrics[argument]["policies"].values():
+            assert policy["drives"] == 2
+            # 8 m of progress per drive: driven, or skipped by the 5 m an intervention moves the vehicle on.
+            assert policy["distance_m"] + 5.0 * policy["interventions"] >= 2 * (8.0 - 1.0)
+            low, value, high = (policy["interventions_per_km"][k] for k in ("low", "value", "high"))
+            assert low <= value <= high
+        assert metrics[argument]["finding"].startswith("Path prediction + pure pursuit against end-to-end steering")
+    assert metrics["steering"]["policies"]["oracle"]["interventions"] == 0
+    videos = sorted(p.name for p in (drive_dir / "videos").iterdir())
+    assert videos == sorted(f"{name}.mp4" for name in metrics["steering"]["policies"])
+    results = (drive_dir / "results.md").read_text()
+    assert results.count("\n## ") == 3 and "| unet-none+temporal |" in results
+    with sqlite3.connect(driven / "mlflow.db") as db:
+        (run,) = db.execute("select run_uuid from runs where name = 'drive'").fetchone()
+        logged = db.execute("select count(*) from metrics where run_uuid = ?", (run,)).fetchone()[0]
+    assert logged > 20
+
+
+def test_the_same_inputs_give_the_same_metrics(compose_config, inputs, driven, tmp_path):
+    run_drive(compose_config(*overrides(inputs, tmp_path), "mlflow.enabled=false"))
+    assert (tmp_path / "drive.json").read_text() == (driven / "drive.json").read_text()
+
+
+def test_an_unknown_policy_is_refused_before_anything_is_written(inputs, tmp_path):
+    cli = [sys.executable, "-m", "offroad_path.drive", *overrides(inputs, tmp_path), "drive.arguments.vehicle=[unet-nothing]", "mlflow.enabled=false"]
+    run = subprocess.run(cli, capture_output=True, text=True)
+    assert run.returncode == 2
+    line = run.stderr.strip().splitlines()[-1]
+    missing = inputs / "runs" / "unet-nothing" / "seed0" / "checkpoints" / "best.ckpt"
+    assert line.startswith(f"error: drive.arguments.vehicle: policy 'unet-nothing' needs {missing}, which does not exist")
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_world_config_that_did_not_render_the_test_world_is_refused(inputs, tmp_path):
+    cli = [sys.executable, "-m", "offroad_path.drive", *overrides(inputs, tmp_path), "world.max_curvature=0.05", "mlflow.enabled=false"]
+    run = subprocess.run(cli, capture_output=True, text=True)
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1].startswith(f"error: {inputs / 'synthetic' / 'test_000'}: rendered with another world config")
+    assert not any(tmp_path.iterdir())
