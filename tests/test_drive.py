@@ -128,7 +128,7 @@ def test_an_object_ahead_is_hit_where_it_stands():
     objects = Objects()
     objects.add_cylinder(np.array([0.3, 30.0]), (-1.5, 0.2), 0.1, OBSTACLE, np.ones(3))  # a post beside the line, 1.5 m tall
     log = drive(setup_for(hand_made_world(0.0, objects=objects)), OraclePolicy(10.0), 0.0)
-    x, z, why = log.interventions[0]
+    _, z, why = log.interventions[0]
     assert why == "object"
     # The front of the body (2.1 m ahead of its centre) reaches the post's disc at z = 30 - 0.1.
     front_reaches = 30.0 - 0.1 - GEOMETRY.length_m / 2

@@ -42,7 +42,8 @@ def overrides(inputs: Path, out: Path) -> list[str]:
             f"drive.pilotnets.pilotnet={inputs / 'pilotnet.ckpt'}", f"drive.pilotnets.pilotnet_slip={inputs / 'pilotnet.ckpt'}",
             "drive.arguments.steering=[unet-none,unet-none+temporal,pilotnet,oracle,straight]",
             "drive.arguments.vehicle=[unet-none,pilotnet]", "drive.arguments.traction=[unet-none,pilotnet_slip,oracle]",
-            "drive.length_m=8", "drive.starts_per_world=2", "drive.width=128", "drive.height=72", "drive.bootstrap.resamples=100", "drive.workers=1",
+            "drive.length_m=8", "drive.starts_per_world=2", "drive.width=128", "drive.height=72", "drive.bootstrap.resamples=100",
+            "drive.workers=1",
             f"drive.out_dir={out / 'drive'}", f"drive.metrics_path={out / 'drive.json'}",
             f"mlflow.tracking_uri=sqlite:///{out / 'mlflow.db'}"]  # fmt: skip
 
@@ -65,8 +66,9 @@ def test_outputs_follow_the_contract(driven):
         assert (drive_dir / "trajectories" / argument / "test_000.png").stat().st_size > 1000
         for policy in metrics[argument]["policies"].values():
             assert policy["drives"] == 2
-            # 8 m of progress per drive: driven, or skipped by the 5 m an intervention moves the vehicle on.
-            assert policy["distance_m"] + 5.0 * policy["interventions"] >= 2 * (8.0 - 1.0)
+            assert policy["route_m"] == pytest.approx(2 * 8.0, abs=0.05)  # every drive finishes its 8 m of route
+            # ... driven, or skipped by the 5 m an intervention moves the vehicle on.
+            assert policy["distance_m"] + 5.0 * policy["interventions"] >= policy["route_m"] - 2 * 1.0
             low, value, high = (policy["interventions_per_km"][k] for k in ("low", "value", "high"))
             assert low <= value <= high
         assert metrics[argument]["finding"].startswith("Path prediction + pure pursuit against end-to-end steering")
@@ -87,7 +89,14 @@ def test_the_same_inputs_give_the_same_metrics(compose_config, inputs, driven, t
 
 
 def test_an_unknown_policy_is_refused_before_anything_is_written(inputs, tmp_path):
-    cli = [sys.executable, "-m", "offroad_path.drive", *overrides(inputs, tmp_path), "drive.arguments.vehicle=[unet-nothing]", "mlflow.enabled=false"]
+    cli = [
+        sys.executable,
+        "-m",
+        "offroad_path.drive",
+        *overrides(inputs, tmp_path),
+        "drive.arguments.vehicle=[unet-nothing]",
+        "mlflow.enabled=false",
+    ]
     run = subprocess.run(cli, capture_output=True, text=True)
     assert run.returncode == 2
     line = run.stderr.strip().splitlines()[-1]

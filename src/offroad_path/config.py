@@ -66,7 +66,7 @@ class SlipConfig:
     """Traction below the kinematic bicycle model's (offroad_path.world.slip): off by default."""
 
     enabled: bool = MISSING  # synthesize: the recorded steering is the input that made the motion under slip
-    factors: dict[str, float] = field(default_factory=dict)  # yaw-rate factor per surface class name; 1 where absent
+    factors: dict[str, float] = MISSING  # yaw-rate factor per surface class name; 1 where absent
     patch_m: float = setting(positive())  # the factor's jitter is drawn once per square patch this wide
     jitter: float = setting(between(0, 1, high_open=True))  # patch factors in [1 - jitter, 1 + jitter] times the surface's
     noise: float = setting(at_least(0))  # per-step (per-frame) noise of the factor, a standard deviation
@@ -431,10 +431,10 @@ class DriveConfig:
 
     synthetic_dir: str = MISSING
     runs_dir: str = MISSING
-    pilotnets: dict[str, str] = field(default_factory=dict)  # end-to-end policy name -> train_steering checkpoint
+    pilotnets: dict[str, str] = MISSING  # end-to-end policy name -> train_steering checkpoint
     out_dir: str = MISSING
     metrics_path: str = MISSING
-    arguments: dict[str, list[str]] = field(default_factory=dict)  # steering | vehicle | traction -> policy names
+    arguments: dict[str, list[str]] = MISSING  # steering | vehicle | traction -> policy names
     worlds: int | None = setting(at_least(1))
     starts_per_world: int = setting(at_least(1))
     length_m: float = setting(positive())

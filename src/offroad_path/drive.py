@@ -18,9 +18,8 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from offroad_path.driving.loop import DriveLog
-from offroad_path.driving.report import ARGUMENTS, comparison_table, finding, score, table, versus_end_to_end
+from offroad_path.driving.report import ARGUMENTS, report
 from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, WorldJob, checkpoint_of, drive_params, drive_world, test_worlds
-from offroad_path.evaluation.bootstrap import Resampling
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
 from offroad_path.utils.outputs import Outputs
@@ -61,31 +60,18 @@ def run_drive(cfg: DictConfig) -> dict:
         raise ValueError(f"drive.starts_per_world: {len(worlds)} test world(s) x {d.starts_per_world} start(s) is one drive; "
                          "intervals need at least 2 (more starts, or more test worlds)")  # fmt: skip
     params = drive_params(cfg.postprocess, d.width, cfg.world.width)
-    resampling = Resampling(d.bootstrap.resamples, d.bootstrap.seed, d.bootstrap.level)
     started = time.perf_counter()
     with atomic_directory(d.out_dir, "drive", key="drive.out_dir") as tmp:
-        jobs = [WorldJob(w, cfg.world, d, cfg.seed, params, cfg.label.disparity, str(tmp), d.video and i == 0) for i, w in enumerate(worlds)]
+        jobs = [
+            WorldJob(w, cfg.world, d, cfg.seed, params, cfg.label.disparity, str(tmp), d.video and i == 0) for i, w in enumerate(worlds)
+        ]
         results = map_processes(drive_world, jobs, d.workers, [f"test world {w.folder}" for w in worlds])
         logs: dict[str, dict[str, list[DriveLog]]] = {argument: {} for argument in d.arguments}
         for per_world in results:
             for argument, g in per_world:
                 logs[argument].setdefault(g.policy, []).append(g)
-        metrics, sections = {}, [f"# Closed-loop driving\n\n{len(worlds)} test worlds x {d.starts_per_world} start(s), "
-                                 f"{d.length_m:g} m of progress each, at {d.speed_mps:g} m/s with {d.rate_hz:g} Hz control; "
-                                 f"95 % intervals by resampling the {len(worlds) * d.starts_per_world} drives "
-                                 f"({d.bootstrap.resamples} resamples). An intervention: the body more than {d.corridor_m:g} m "
-                                 f"from every centre line, or into an object{', or into water' if d.water_intervenes else ''}.\n"]  # fmt: skip
-        for argument, by_policy in logs.items():
-            scores = [score(group, d.intervention_s, resampling) for group in by_policy.values()]
-            comparisons = versus_end_to_end(by_policy, list(d.pilotnets), resampling)
-            sentence = finding(comparisons)
-            metrics[argument] = {"policies": {s.policy: s.as_dict() for s in scores},
-                                 "path_minus_end_to_end": {f"{a} - {b}": {"value": i.estimate, "low": i.low, "high": i.high}
-                                                           for (a, b), i in comparisons.items()},
-                                 "finding": sentence}  # fmt: skip
-            sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores)}\n\n{comparison_table(comparisons)}\n\n{sentence}\n")
-        metrics["drives"] = {"worlds": [w.name for w in worlds], "starts_per_world": d.starts_per_world, "length_m": d.length_m}
-        (tmp / "results.md").write_text("".join(sections))
+        markdown, metrics = report(logs, d, [w.name for w in worlds])
+        (tmp / "results.md").write_text(markdown)
         (tmp / "drive.json").write_text(json.dumps(metrics, indent=2) + "\n")
     write_text_atomic(d.metrics_path, json.dumps(metrics, indent=2) + "\n", "drive")
     log.info("drove %d test worlds in %.0f s; %s", len(worlds), time.perf_counter() - started,

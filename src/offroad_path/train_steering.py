@@ -56,7 +56,9 @@ def slippery_steering(cfg: DictConfig) -> dict[str, np.ndarray]:
     """Each labelled synthetic sequence's steering had it been driven on world.slip's ground: the
     driver's input that made the same motion (offroad_path.world.record.steering_under_slip)."""
     from offroad_path.world.record import steering_under_slip  # the world and its renderer, only for this
-    folders = [run.sequence.root for run in read_label_run(Path(cfg.steering.labels_dir)) if run.sequence.meta.get("generator") == "offroad_path.world"]
+
+    runs = read_label_run(Path(cfg.steering.labels_dir))
+    folders = [run.sequence.root for run in runs if run.sequence.meta.get("generator") == "offroad_path.world"]
     if not folders:
         raise ValueError(f"steering.slip: {cfg.steering.labels_dir} labels no rendered sequence, whose world could be driven with slip")
     log.info("steering under slip (world.slip) for %d rendered sequences", len(folders))
@@ -69,7 +71,7 @@ def train_steering(cfg: DictConfig) -> dict:
     L.seed_everything(cfg.seed, workers=True)
     # The frames follow the path split's blocks of driving, with its guard (conf/split).
     angles = slippery_steering(cfg) if s.slip else None
-    parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror, angles)
+    parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror, steering=angles)
     data = SteeringDataModule(parts, s, cfg.seed)
     task = SteeringTask.from_config(s)
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")

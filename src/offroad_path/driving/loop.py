@@ -38,7 +38,8 @@ class DriveLog:
     world: str
     start_s: float
     elapsed_s: float = 0.0
-    distance_m: float = 0.0
+    distance_m: float = 0.0  # driven
+    progress_m: float = 0.0  # along the reference drive, interventions' skips included: the same for every policy that finishes
     steps: int = 0
     no_path: int = 0  # steps the policy said nothing (steered straight)
     water_entries: int = 0  # times a wheel went from dry ground into water
@@ -99,6 +100,7 @@ def drive(setup: Setup, policy: Policy, start_s: float, video: bool = False) -> 
             s = farthest = farthest + settings.respawn_m
             state, wet = start_state(course, s), False
             policy.reset()
+    log.progress_m = min(farthest, end_s) - start_s
     return log
 
 

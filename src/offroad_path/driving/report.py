@@ -1,10 +1,12 @@
 """Scores of closed-loop drives, with block-bootstrap intervals across drives (a world and a start
 point each, the unit resampled: offroad_path.evaluation.bootstrap), and the report's tables.
 
-Per policy: interventions per km, autonomy (1 - interventions x intervention_s / elapsed time),
-the mean and 95th-percentile lateral offset from the nearest centre line, water entries per km.
-Each path policy is compared with PilotNet on the same drives, paired: the interval of the
-difference in interventions per km.
+Per policy: interventions per km of route (progress along the reference drive, the same for every
+policy that finishes its drives, so that a paired difference is one of counts alone); autonomy,
+1 - interventions x intervention_s / elapsed time (Bojarski et al. 2016; below 0 when interventions
+come faster than one per intervention_s); the mean and 95th-percentile lateral offset from the
+nearest centre line; water entries per km. Each path policy is compared with each end-to-end one on
+the same drives, paired: the interval of the difference in interventions per km.
 """
 
 from __future__ import annotations
@@ -23,21 +25,22 @@ ARGUMENTS = {
 }
 
 
-def _per_km(s: np.ndarray) -> np.ndarray:  # (..., k) sums with interventions at 0, metres at 1
+def _per_km(s: np.ndarray) -> np.ndarray:  # (..., k) sums with interventions at 0, metres of route at 1
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(s[..., 1] > 0, 1000.0 * s[..., 0] / np.where(s[..., 1] > 0, s[..., 1], 1), np.nan)
 
 
 def sums(logs: list[DriveLog]) -> np.ndarray:
-    """(drives, 5): interventions, metres, seconds, summed offsets, steps; one row per drive."""
-    return np.array([[len(g.interventions), g.distance_m, g.elapsed_s, sum(g.offsets), g.steps] for g in logs], float)
+    """(drives, 5): interventions, metres of route, seconds, summed offsets, steps; one row per drive."""
+    return np.array([[len(g.interventions), g.progress_m, g.elapsed_s, sum(g.offsets), g.steps] for g in logs], float)
 
 
 @dataclass(frozen=True)
 class PolicyScore:
     policy: str
     drives: int
-    distance_m: float
+    route_m: float  # progress along the reference drives
+    distance_m: float  # driven
     interventions: int
     per_km: Interval
     autonomy_pct: Interval
@@ -51,7 +54,7 @@ class PolicyScore:
         def iv(i: Interval) -> dict:
             return {"value": i.estimate, "low": i.low, "high": i.high}
 
-        return {"drives": self.drives, "distance_m": self.distance_m, "interventions": self.interventions,
+        return {"drives": self.drives, "route_m": self.route_m, "distance_m": self.distance_m, "interventions": self.interventions,
                 "interventions_per_km": iv(self.per_km), "autonomy_pct": iv(self.autonomy_pct),
                 "mean_offset_m": iv(self.mean_offset_m), "p95_offset_m": iv(self.p95_offset_m),
                 "water_entries_per_km": self.water_per_km, "no_path_steps": self.no_path_steps,
@@ -73,13 +76,14 @@ def score(logs: list[DriveLog], intervention_s: float, resampling: Resampling) -
     return PolicyScore(
         policy=logs[0].policy,
         drives=len(logs),
-        distance_m=float(s[:, 1].sum()),
+        route_m=float(s[:, 1].sum()),
+        distance_m=sum(g.distance_m for g in logs),
         interventions=int(s[:, 0].sum()),
         per_km=ratio(_per_km),
         autonomy_pct=ratio(lambda c: 100.0 * (1.0 - c[..., 0] * intervention_s / c[..., 2])),
         mean_offset_m=ratio(lambda c: c[..., 3] / c[..., 4]),
         p95_offset_m=Interval(float(np.percentile(np.concatenate(offsets), 95)), *resampling.percentiles(p95)),
-        water_per_km=1000.0 * sum(g.water_entries for g in logs) / max(float(s[:, 1].sum()), 1e-9),
+        water_per_km=1000.0 * sum(g.water_entries for g in logs) / max(float(s[:, 1].sum()), 1e-9),  # per km of route
         no_path_steps=sum(g.no_path for g in logs),
         by_cause={why: causes.count(why) for why in sorted(set(causes))},
     )
@@ -94,7 +98,7 @@ def versus_end_to_end(logs: dict[str, list[DriveLog]], end_to_end: list[str], re
 
 def table(scores: list[PolicyScore]) -> str:
     """A markdown table, one row per policy."""
-    rows = ["| policy | distance (m) | interventions | per km [95 % CI] | autonomy % [95 % CI] | mean offset (m) [95 % CI] | "
+    rows = ["| policy | driven (m) | interventions | per km of route [95 % CI] | autonomy % [95 % CI] | mean offset (m) [95 % CI] | "
             "95th pct offset (m) [95 % CI] | water entries per km | steps without a path |", "|" + " --- |" * 9]  # fmt: skip
     for p in scores:
         rows.append(f"| {p.policy} | {p.distance_m:.0f} | {p.interventions} | {p.per_km.text(1)} | {p.autonomy_pct.text(1)} | "
@@ -119,3 +123,30 @@ def finding(comparisons: dict[tuple[str, str], Interval]) -> str:
     parts = ([f"fewer interventions: {'; '.join(better)}"] if better else []) + ([f"more: {'; '.join(worse)}"] if worse else [])
     parts += [f"no difference measured between {', '.join(same)}"] if same else []
     return "Path prediction + pure pursuit against end-to-end steering, paired on the same drives: " + "; ".join(parts) + "."
+
+
+def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str]) -> tuple[str, dict]:
+    """results.md and the metrics of every argument's drives (logs: argument -> policy -> drives in
+    world and start order; d: the drive config)."""
+    resampling = Resampling(d.bootstrap.resamples, d.bootstrap.seed, d.bootstrap.level)
+    drives = len(worlds) * d.starts_per_world
+    water = ", or into water" if d.water_intervenes else ""
+    sections = [f"# Closed-loop driving\n\n{len(worlds)} test worlds x {d.starts_per_world} start(s), {d.length_m:g} m of route each, "
+                f"at {d.speed_mps:g} m/s with {d.rate_hz:g} Hz control; {100 * d.bootstrap.level:g} % intervals by resampling the "
+                f"{drives} drives ({d.bootstrap.resamples} resamples). An intervention: the body more than {d.corridor_m:g} m from "
+                f"every centre line (track, forks, reference drive), or into an object{water}.\n"]  # fmt: skip
+    metrics: dict = {}
+    for argument, by_policy in logs.items():
+        scores = [score(group, d.intervention_s, resampling) for group in by_policy.values()]
+        comparisons = versus_end_to_end(by_policy, list(d.pilotnets), resampling)
+        sentence = finding(comparisons)
+        metrics[argument] = {
+            "policies": {s.policy: s.as_dict() for s in scores},
+            "path_minus_end_to_end": {
+                f"{a} - {b}": {"value": i.estimate, "low": i.low, "high": i.high} for (a, b), i in comparisons.items()
+            },
+            "finding": sentence,
+        }
+        sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores)}\n\n{comparison_table(comparisons)}\n\n{sentence}\n")
+    metrics["drives"] = {"worlds": worlds, "starts_per_world": d.starts_per_world, "length_m": d.length_m}
+    return "".join(sections), metrics

@@ -47,7 +47,7 @@ def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
         if meta.get("split") == "test":
             found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), int(meta["seed"])))
     if not found:
-        raise ValueError(f"{synthetic_dir}: no held-out test world (a meta.json with \"split\": \"test\"); run synthesize")
+        raise ValueError(f'{synthetic_dir}: no held-out test world (a meta.json with "split": "test"); run synthesize')
     return found[:limit] if limit else found
 
 

@@ -30,8 +30,8 @@ class SteeringFrame:
     mirrored: bool = False
 
 
-def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: float, mirror: bool,
-                   steering: dict[str, np.ndarray] | None = None) -> dict[str, list[SteeringFrame]]:  # fmt: skip
+def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: float, mirror: bool,  # noqa: PLR0913
+                   *, steering: dict[str, np.ndarray] | None = None) -> dict[str, list[SteeringFrame]]:  # fmt: skip
     """{'train', 'val', 'test'}: frames of every labelled sequence that has steering.txt (or, with
     `steering`, an angle per frame by sequence name in place of steering.txt's)."""
     runs = read_label_run(labels_dir)

@@ -104,7 +104,10 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         "frames": len(world.poses),
     } | ({"split": "test"} if held_out else {})
     if world.slip is not None:  # only then: a world without slip keeps today's meta.json byte for byte
-        meta["steering"] = "the driver's input under slip (world.slip): bicycle-model wheel angle of the true curvature over the yaw-rate factor, over max_steering_deg"
+        meta["steering"] = (
+            "the driver's input under slip (world.slip): bicycle-model wheel angle of the true curvature "
+            "over the yaw-rate factor, over max_steering_deg"
+        )
         meta["slip"] = OmegaConf.to_container(cfg.slip) if OmegaConf.is_config(cfg.slip) else asdict(cfg.slip)
     (out_dir / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
     summary = {"name": out_dir.name, "seed": seed, "frames": len(world.poses), "distance_m": distance}

@@ -1,0 +1,63 @@
+"""Closed-loop driving throughput: control steps per second of the loop (render + policy + move +
+judge), per kind of policy, on one core, in one held-out test world of the committed pipeline.
+
+    python benchmarks/drive_speed.py [--policies unet-segmentation unet-segmentation+temporal pilotnet oracle]
+                                     [--metres 40] [--set drive.width=512 drive.height=288]
+
+Runs the drive stage's own code (offroad_path.driving) with its config (conf/drive, any `--set`
+overrides) on data/synthetic's first test world, with the checkpoints the pipeline trained
+(data/runs, data/steering), and prints milliseconds per step and steps per second for each policy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import cv2
+import torch
+
+from offroad_path.config import load_config
+from offroad_path.driving.course import Course
+from offroad_path.driving.loop import LoopSettings, Setup, drive
+from offroad_path.driving.policies import Camera
+from offroad_path.driving.vehicle import Vehicle
+from offroad_path.driving.worlds import drive_params, make_policy, test_worlds
+from offroad_path.geometry.stereo import sgbm
+from offroad_path.world.record import rebuild_world
+from offroad_path.world.render import PinholeCamera
+from offroad_path.world.scene import vehicle_geometry
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--policies", nargs="*", default=["unet-segmentation", "unet-segmentation+temporal", "pilotnet", "oracle"])
+    parser.add_argument("--metres", type=float, default=40.0)
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="Hydra overrides")
+    args = parser.parse_args()
+    cv2.setNumThreads(1)  # as in the stage's workers: one process per core
+    torch.set_num_threads(1)
+    cfg = load_config(*args.set)
+    d = cfg.drive
+    world_info = test_worlds(Path(d.synthetic_dir), 1)[0]
+    start = time.perf_counter()
+    world = rebuild_world(cfg.world, Path(world_info.folder))
+    print(f"{world_info.name}: rebuilt in {time.perf_counter() - start:.1f} s; camera {d.width} x {d.height}, {args.metres:g} m per policy")
+    geometry = vehicle_geometry(cfg.world)
+    camera = PinholeCamera.from_fov(d.width, d.height, cfg.world.hfov_deg)
+    rig = Camera(world, camera, cfg.world.rig.baseline_m, cfg.world.max_distance_m, sgbm(cfg.label.disparity))
+    settings = LoopSettings(d.rate_hz, d.speed_mps, args.metres, d.respawn_m, d.timeout_factor, d.water_intervenes)
+    course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
+    setup = Setup(course, Vehicle(geometry, d.steering_rate_deg_s), rig, settings)
+    params = drive_params(cfg.postprocess, d.width, cfg.world.width)
+    for name in args.policies:
+        policy = make_policy(name, d, cfg.seed, params)
+        start = time.perf_counter()
+        log = drive(setup, policy, 0.0)
+        elapsed = time.perf_counter() - start
+        print(f"{name:32s} {log.steps:4d} steps  {1000 * elapsed / log.steps:7.1f} ms/step  {log.steps / elapsed:7.1f} steps/s")
+
+
+if __name__ == "__main__":
+    main()
