@@ -151,6 +151,11 @@ def tiny_repo(repo: Path) -> Path:
         "data": {"width": 64, "height": 48, "batch_size": 2}, "model": {"width": 0.125}, "trainer": {"max_epochs": 1},
         "pretrain": {"max_epochs": 1}, "steering": {"max_epochs": 1},
         "evaluate": {"temporal": {"enabled": False}},  # run three times here; tests/test_temporal.py scores it once
+        # One policy of each kind, 4 m from two starts in the test world (tests/test_drive_stage.py drives more).
+        "drive": {"arguments": {"steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet"],
+                                "traction": ["unet-segmentation", "pilotnet_slip"]},
+                  "worlds": 1, "starts_per_world": 2, "length_m": 4.0, "width": 128, "height": 72, "video": False,
+                  "bootstrap": {"resamples": 100}},
         "threads": 1, "experiment_name": "tiny",
     }  # fmt: skip
     (repo / "conf" / "experiment" / "tiny.yaml").write_text("# @package _global_\n" + yaml.safe_dump(tiny))

@@ -41,13 +41,13 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     elsewhere = narrowed(tiny_repo(repo_copy.parent / "another" / "place" / "repo"), "unet")
     out, _ = dvc_at_once([repo_copy, elsewhere], "repro")
     ran = set(re.findall(r"Running stage '([^']+)'", out))
-    stages = {"synthesize", "label", "split", "evaluate", "train_steering"} | {f"pretrain@{m}" for m in MODELS}
+    stages = {"synthesize", "label", "split", "evaluate", "train_steering", "train_steering_slip", "drive"} | {f"pretrain@{m}" for m in MODELS}
     stages |= {f"{s}@{m}-0" for s in ("train_scratch", "train_pretrained") for m in MODELS}
     stages |= {f"postprocess@{m}-{p}-0" for m in MODELS for p in ("none", "segmentation")}
     assert ran == stages
     here, there = lock_entries(repo_copy), lock_entries(elsewhere)
     assert set(there) == {s for s in stages if "@" not in s or "unet" in s}
-    for stage in set(there) - {"evaluate"}:  # evaluate's params and outputs hold the grid
+    for stage in set(there) - {"evaluate", "drive"}:  # their params and outputs hold the grid
         assert there[stage] == here[stage], stage
     scores, all_scores = (json.loads((r / "metrics" / "evaluation.json").read_text()) for r in (elsewhere, repo_copy))
     for run in ("unet-none", "unet-segmentation"):
@@ -78,6 +78,17 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     assert {p.name for p in (repo_copy / "data" / "evaluation" / "figures").iterdir()} == {"good_and_bad_cases.png", "postprocessing.png"}
     steering = json.loads((repo_copy / "metrics" / "steering.json").read_text())
     assert steering["test_frames"] > 0 and 0 <= steering["mean_absolute_error"] <= 2
+    slippery = json.loads((repo_copy / "metrics" / "steering_slip.json").read_text())
+    # the same frames, each steered at least as hard (the factors are at most 1), some harder
+    assert slippery["test_frames"] == steering["test_frames"]
+    assert slippery["straight_ahead_mean_absolute_error"] > steering["straight_ahead_mean_absolute_error"]
+    # drive: every argument's policies from both starts of the test world, the same as in the other place
+    drove = json.loads((repo_copy / "metrics" / "drive.json").read_text())
+    assert {a: list(drove[a]["policies"]) for a in ("steering", "vehicle", "traction")} == {
+        "steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet"],
+        "traction": ["unet-segmentation", "pilotnet_slip"]}  # fmt: skip
+    assert drove == json.loads((elsewhere / "metrics" / "drive.json").read_text())
+    assert {p.name for p in (repo_copy / "data" / "drive" / "trajectories").iterdir()} == {"steering", "vehicle", "traction"}
     assert "segnet-none" in dvc(repo_copy, "metrics", "show")
     assert "Data and pipelines are up to date" in dvc(repo_copy, "repro")
     # A U-Net setting, changed by a DVC experiment, reruns the U-Net stages and nothing else.

@@ -46,6 +46,19 @@ def test_full_preset_is_the_paper_size_with_the_projects_fixes(compose_config):
     assert full.synthesize.test_worlds.min_blocks == 30  # held-out test worlds, as the laptop default
 
 
+def test_full_preset_drives_every_network_at_the_worlds_size(compose_config):
+    laptop, full = compose_config(), compose_config("experiment=full")
+    runs = list(full.evaluate.runs)
+    assert len(runs) == 6
+    assert set(full.drive.arguments.steering) == {*runs, *(f"{r}+temporal" for r in runs), "pilotnet", "oracle", "straight"}
+    assert set(full.drive.arguments.traction) == {*runs, "pilotnet_slip", "pilotnet", "oracle", "straight"}
+    assert (full.drive.width, full.drive.height) == (full.world.width, full.world.height) == (512, 288)
+    assert full.drive.starts_per_world * full.drive.length_m > laptop.drive.starts_per_world * laptop.drive.length_m
+    # The laptop drives fewer networks, smaller, for about 3 minutes; slip stays off in synthesis for both.
+    assert set(laptop.drive.arguments.steering) < set(full.drive.arguments.steering)
+    assert not laptop.world.slip.enabled and not full.world.slip.enabled
+
+
 def test_laptop_fast_is_the_laptop_preset_with_a_smaller_world_and_shorter_pretraining(compose_config):
     """The seed rule's candidate of the second speed round (benchmarks/README.md), one override away."""
     laptop, fast = compose_config(), compose_config("experiment=laptop_fast")

@@ -1,5 +1,5 @@
 """The README's results section, generated from the committed run's metrics (metrics/evaluation.json,
-label.json, steering.json), so that no number in it is copied by hand or quotes an older run.
+label.json, steering.json, drive.json), so that no number in it is copied by hand or quotes an older run.
 
     python -m offroad_path.evaluation.readme            # rewrite the block between the markers in README.md
     python -m offroad_path.evaluation.readme --check    # exit 1 when README.md disagrees with metrics/
@@ -38,9 +38,9 @@ def _f(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.3f}"
 
 
-def results_markdown(evaluation: dict, label: dict, steering: dict, resamples: int) -> str:
-    """The results section's body (between the markers) from the three metrics files; resamples:
-    evaluate.bootstrap.resamples of the run that wrote them."""
+def results_markdown(evaluation: dict, label: dict, steering: dict, resamples: int, drive: dict | None = None) -> str:
+    """The results section's body (between the markers) from the metrics files (drive.json: when
+    there is one); resamples: evaluate.bootstrap.resamples of the run that wrote them."""
     u = evaluation.get("uncertainty", {})
     runs = [key for key, value in evaluation.items() if isinstance(value, dict) and "raw" in value]
     blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
@@ -80,7 +80,7 @@ def results_markdown(evaluation: dict, label: dict, steering: dict, resamples: i
             out.append(f"| {network_name(model)} | {pretraining} | {pp} | {r['accuracy']:.3f} | {r['recall']:.3f} | {r['precision']:.3f} | "
                        f"{found.text() if found else _f(r['iou'])} | {spread}{paper[0]} | {paper[1]} |")  # fmt: skip
     out += ["", *_comparisons(u), *_baselines(evaluation), *_steering(evaluation, steering), *_conditions(evaluation, runs),
-            *_temporal(evaluation)]  # fmt: skip
+            *_temporal(evaluation), *_driving(drive or {})]  # fmt: skip
     return "\n".join(out).rstrip("\n") + "\n"
 
 
@@ -162,6 +162,31 @@ def _temporal(evaluation: dict) -> list[str]:
     return [*lines, ""]
 
 
+ARGUMENT_TITLES = {"steering": "(a) closed loop", "vehicle": "(b) another vehicle", "traction": "(c) slippery ground"}
+
+
+def _driving(drive: dict) -> list[str]:
+    arguments = [a for a in ARGUMENT_TITLES if a in drive]
+    if not arguments:
+        return []
+    d = drive["drives"]
+    policies = list(dict.fromkeys(p for a in arguments for p in drive[a]["policies"]))
+    lines = [f"Closed loop in the test worlds (`data/drive/results.md`): {len(d['worlds'])} worlds x {d['starts_per_world']} start(s) x "
+             f"{d['length_m']:g} m of route per policy, training seed 0 of each network; interventions per km of route "
+             "[95 % interval, resampling the drives]:\n",
+             "| policy | " + " | ".join(ARGUMENT_TITLES[a] for a in arguments) + " |", "|" + " --- |" * (1 + len(arguments))]  # fmt: skip
+    for name in policies:
+        cells = []
+        for a in arguments:
+            entry = drive[a]["policies"].get(name)
+            cells.append(Interval(**{"estimate": entry["interventions_per_km"]["value"], "low": entry["interventions_per_km"]["low"],
+                                     "high": entry["interventions_per_km"]["high"]}).text(1) if entry else "")  # fmt: skip
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines.append("")
+    lines += [f"- {ARGUMENT_TITLES[a]}: {drive[a]['finding']}" for a in arguments]
+    return [*lines, ""]
+
+
 def with_results(readme: str, block: str, path: Path = Path("README.md")) -> str:
     """readme with the text between BEGIN and END replaced by block; ValueError when the markers are missing."""
     if readme.count(BEGIN) != 1 or readme.count(END) != 1 or readme.index(BEGIN) > readme.index(END):
@@ -172,10 +197,11 @@ def with_results(readme: str, block: str, path: Path = Path("README.md")) -> str
 
 def generated(metrics_dir: Path) -> str:
     read = {name: json.loads((metrics_dir / f"{name}.json").read_text()) for name in ("evaluation", "label", "steering")}
+    drive = json.loads((metrics_dir / "drive.json").read_text()) if (metrics_dir / "drive.json").is_file() else None
     from offroad_path.config import load_config
 
     resamples = load_config().evaluate.bootstrap.resamples  # the committed run's: dvc.lock tracks conf/evaluate
-    return results_markdown(read["evaluation"], read["label"], read["steering"], resamples)
+    return results_markdown(read["evaluation"], read["label"], read["steering"], resamples, drive)
 
 
 def main(argv: list[str] | None = None) -> int:
