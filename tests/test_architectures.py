@@ -81,4 +81,4 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
     stages = set(listed.stdout.split())
     new = {"pretrain@tiny", "train_scratch@tiny-0", "train_pretrained@tiny-0", "postprocess@tiny-none-0", "postprocess@tiny-segmentation-0"}
     assert new <= stages, listed.stdout + listed.stderr
-    assert len(stages) == 5 + 4 * 5  # synthesize, label, split, evaluate, train_steering; 5 per network
+    assert len(stages) == 7 + 4 * 5  # synthesize, label, split, evaluate, train_steering, train_steering_slip, drive; 5 per network

@@ -179,8 +179,8 @@ def _driving(drive: dict) -> list[str]:
         cells = []
         for a in arguments:
             entry = drive[a]["policies"].get(name)
-            cells.append(Interval(**{"estimate": entry["interventions_per_km"]["value"], "low": entry["interventions_per_km"]["low"],
-                                     "high": entry["interventions_per_km"]["high"]}).text(1) if entry else "")  # fmt: skip
+            per_km = entry["interventions_per_km"] if entry else None
+            cells.append(Interval(per_km["value"], per_km["low"], per_km["high"]).text(1) if per_km else "")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     lines.append("")
     lines += [f"- {ARGUMENT_TITLES[a]}: {drive[a]['finding']}" for a in arguments]
