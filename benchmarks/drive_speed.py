@@ -21,7 +21,7 @@ import torch
 from offroad_path.config import load_config
 from offroad_path.driving.course import Course
 from offroad_path.driving.loop import LoopSettings, Setup, drive
-from offroad_path.driving.policies import Camera
+from offroad_path.driving.policies import StereoRig
 from offroad_path.driving.vehicle import Vehicle
 from offroad_path.driving.worlds import drive_params, make_policy, test_worlds
 from offroad_path.geometry.stereo import sgbm
@@ -46,7 +46,7 @@ def main() -> None:
     print(f"{world_info.name}: rebuilt in {time.perf_counter() - start:.1f} s; camera {d.width} x {d.height}, {args.metres:g} m per policy")
     geometry = vehicle_geometry(cfg.world)
     camera = PinholeCamera.from_fov(d.width, d.height, cfg.world.hfov_deg)
-    rig = Camera(world, camera, cfg.world.rig.baseline_m, cfg.world.max_distance_m, sgbm(cfg.label.disparity))
+    rig = StereoRig(world, camera, cfg.world.rig.baseline_m, cfg.world.max_distance_m, sgbm(cfg.label.disparity))
     settings = LoopSettings(d.rate_hz, d.speed_mps, args.metres, d.respawn_m, d.timeout_factor, d.water_intervenes)
     course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
     setup = Setup(course, Vehicle(geometry, d.steering_rate_deg_s), rig, settings)

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from offroad_path.driving.course import Course
-from offroad_path.driving.policies import Camera, Frame, Policy
+from offroad_path.driving.policies import Frame, Policy, StereoRig
 from offroad_path.driving.vehicle import State, Vehicle, advance
 from offroad_path.viz import overlay
 
@@ -60,7 +60,7 @@ class Setup:
 
     course: Course
     vehicle: Vehicle
-    rig: Camera | None  # None: no policy looks (oracle, straight) and no video
+    rig: StereoRig | None  # None: no policy looks (oracle, straight) and no video
     settings: LoopSettings
 
 

@@ -28,13 +28,14 @@ from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity
 from offroad_path.inference.runners import PathModel
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.postprocessing.temporal import TemporalFilter
+from offroad_path.steering.dataset import steering_transforms
 from offroad_path.steering.pure_pursuit import GroundCamera, pure_pursuit, steering_from_path
 from offroad_path.world.render import PinholeCamera, render_view
 from offroad_path.world.trajectory import camera_poses_at
 
 
 @dataclass
-class Camera:
+class StereoRig:
     """The driven vehicle's stereo rig in one world: renders the pair at a pose, matches it."""
 
     world: object
@@ -60,7 +61,7 @@ class Frame:
     progress_s: float
     vehicle: Vehicle
     course: Course
-    rig: Camera
+    rig: StereoRig
 
     @cached_property
     def pose(self) -> np.ndarray:  # (4, 4) left camera to world
@@ -114,10 +115,13 @@ class PilotNetPolicy(Policy):
     height: int
     name: str = "pilotnet"  # drive.pilotnets' key
 
+    def __post_init__(self) -> None:
+        self._prepare = steering_transforms(jitter=0.0, seed=0)
+
     def steer(self, frame: Frame) -> float | None:
+        # The resize and normalisation of training (steering.dataset), without the jitter.
         image = cv2.resize(frame.left, (self.width, self.height), interpolation=cv2.INTER_LINEAR)
-        mean, std = np.array([0.485, 0.456, 0.406]) * 255, np.array([0.229, 0.224, 0.225]) * 255  # albumentations' Normalize
-        batch = torch.from_numpy(((image - mean) / std).astype(np.float32)).permute(2, 0, 1)[None]  # (1, 3, H, W)
+        batch = self._prepare(image=image)["image"][None]  # (1, 3, H, W)
         with torch.no_grad():
             normalised = float(self.task(batch)[0])
         return normalised * frame.vehicle.lock_rad

@@ -16,7 +16,7 @@ import torch
 
 from offroad_path.driving.course import Course
 from offroad_path.driving.loop import DriveLog, LoopSettings, Setup, drive
-from offroad_path.driving.policies import Camera, OraclePolicy, PathPolicy, PilotNetPolicy, Policy, StraightPolicy
+from offroad_path.driving.policies import OraclePolicy, PathPolicy, PilotNetPolicy, Policy, StereoRig, StraightPolicy
 from offroad_path.driving.vehicle import Vehicle
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.postprocessing import PostprocessParams
@@ -110,7 +110,7 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
     for argument, names in d.arguments.items():
         geometry = _geometry(d.other_vehicle) if argument == "vehicle" else vehicle_geometry(job.world_cfg)
         course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
-        rig = Camera(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
+        rig = StereoRig(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
         usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)
         starts = [usable * k / d.starts_per_world for k in range(d.starts_per_world)]
         logs: dict[str, list[DriveLog]] = {}
