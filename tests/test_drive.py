@@ -120,8 +120,12 @@ def test_an_intervention_puts_the_vehicle_back_on_the_centre_line():
     # The next step starts on the circle, heading along it, and drives 1 m straight: sqrt(R^2 + 1) - R from it.
     x, z = log.trajectory[gap + 1]
     assert math.hypot(x - radius, z) - radius == pytest.approx(math.sqrt(radius**2 + 1) - radius, abs=1e-3)
-    # ... respawn_m past the farthest progress made before it left.
-    assert len(log.interventions) >= 2
+    # It started respawn_m past the farthest progress: the arc of the last step still in the corridor
+    # (the circle's centre is (R, 0); a point's arc is R times its angle from the start).
+    x_last, z_last = log.trajectory[gap - 2]
+    farthest = radius * math.atan2(z_last, radius - x_last)
+    started = radius * (math.atan2(z, radius - x) - math.atan(1 / radius))
+    assert started == pytest.approx(farthest + SETTINGS.respawn_m, abs=ARC_STEP_M)
 
 
 def test_an_object_ahead_is_hit_where_it_stands():

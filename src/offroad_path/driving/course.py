@@ -21,8 +21,6 @@ from offroad_path.world.classes import WATER
 from offroad_path.world.objects import BOX, CYLINDER, SPHERE
 from offroad_path.world.trajectory import ARC_STEP_M, Curve, VehicleGeometry
 
-EVENTS = ("corridor", "object", "water")  # why an intervention happened (water: when drive.water_intervenes)
-
 
 @dataclass(frozen=True)
 class Footprint:

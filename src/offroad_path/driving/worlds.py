@@ -23,7 +23,7 @@ from offroad_path.postprocessing import PostprocessParams
 from offroad_path.world.record import rebuild_world
 from offroad_path.world.render import PinholeCamera
 from offroad_path.world.scene import World, vehicle_geometry
-from offroad_path.world.slip import SLIP_STREAM, make_slip
+from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip
 from offroad_path.world.trajectory import VehicleGeometry
 
 matplotlib.use("Agg")
@@ -107,6 +107,7 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
     settings = LoopSettings(d.rate_hz, d.speed_mps, d.length_m, d.respawn_m, d.timeout_factor, d.water_intervenes)
     policies: dict[str, Policy] = {}
     out: list[tuple[str, DriveLog]] = []
+    slip = _slip(world, job) if "traction" in d.arguments else None
     for argument, names in d.arguments.items():
         geometry = _geometry(d.other_vehicle) if argument == "vehicle" else vehicle_geometry(job.world_cfg)
         course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
@@ -119,7 +120,7 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
                 policies[name] = make_policy(name, d, job.training_seed, job.postprocess)
             policy = policies[name]
             for k, start in enumerate(starts):
-                yaw = _yaw_factor(world, job, k) if argument == "traction" else None
+                yaw = _yaw_factor(world, slip, job.world.seed, k) if argument == "traction" else None
                 setup = Setup(course, Vehicle(geometry, d.steering_rate_deg_s, yaw), rig, settings)
                 video = job.video and argument == "steering" and k == 0
                 log = drive(setup, policy, start, video)
@@ -132,13 +133,17 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
     return out
 
 
-def _yaw_factor(world: World, job: WorldJob, start: int):
-    """The traction argument's yaw-rate factor: world.slip's surfaces and patches, with per-sub-step
-    noise drawn from a generator of the world and start, the same sequence for every policy."""
+def _slip(world: World, job: WorldJob) -> Slip:
+    """The traction argument's ground: world.slip's surfaces and patches over the whole world."""
     grid = world.material_grid
     lo = np.array([grid.x0, grid.z0])
-    slip = world.slip or make_slip(job.world_cfg.slip, job.world.seed, lo, lo + np.array(grid.shape[::-1]) * grid.step)
-    rng = np.random.default_rng(np.random.SeedSequence([job.world.seed, SLIP_STREAM, 2, start]))
+    return world.slip or make_slip(job.world_cfg.slip, job.world.seed, lo, lo + np.array(grid.shape[::-1]) * grid.step)
+
+
+def _yaw_factor(world: World, slip: Slip, seed: int, start: int):
+    """The yaw-rate factor on `slip`'s ground, with per-sub-step noise drawn from a generator of the
+    world (seed) and start, the same sequence for every policy."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, SLIP_STREAM, 2, start]))
 
     def factor(xz: np.ndarray) -> float:
         here = xz[None]
