@@ -19,6 +19,7 @@ from pathlib import Path
 import lightning as L
 import numpy as np
 import torch
+from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.data.labels import label_run_folders, read_label_run
@@ -111,6 +112,7 @@ def train_steering(cfg: DictConfig) -> dict:
     write_text_atomic(s.plots_path, "truth,prediction\n" + pairs, "train_steering")
     if logger is not None:
         logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
+    if isinstance(logger, MLFlowLogger):
         for name in ("scatter.png", "error_by_magnitude.csv"):
             logger.experiment.log_artifact(logger.run_id, str(Path(s.out_dir) / name))
     log.info(

@@ -12,7 +12,7 @@ import torch
 import torch.nn.functional as F
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import EarlyStopping
-from lightning.pytorch.loggers import MLFlowLogger
+from lightning.pytorch.loggers import MLFlowLogger, WandbLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.data.loading import load_sample
@@ -22,13 +22,14 @@ from offroad_path.viz import colour_semantic, overlay
 
 
 class LogSamples(L.Callback):
-    """After each validation epoch, validation predictions beside their targets, as one MLflow image."""
+    """After each validation epoch, validation predictions beside their targets, as one image in
+    MLflow or W&B (other loggers have no images)."""
 
     def __init__(self, count: int):
         self.count = count
 
     def on_validation_epoch_end(self, trainer: L.Trainer, task: SegmentationTask) -> None:
-        if trainer.sanity_checking or not isinstance(trainer.logger, MLFlowLogger) or self.count <= 0:
+        if trainer.sanity_checking or not isinstance(trainer.logger, MLFlowLogger | WandbLogger) or self.count <= 0:
             return
         dataset = trainer.val_dataloaders.dataset
         rows = []
@@ -42,6 +43,9 @@ class LogSamples(L.Callback):
                 rows.append(np.hstack([overlay(image, target), overlay(image, predicted)]))
             else:
                 rows.append(np.hstack([image, colour_semantic(target.astype(np.uint8)), colour_semantic(predicted.astype(np.uint8))]))
+        if isinstance(trainer.logger, WandbLogger):
+            trainer.logger.log_image("samples", [np.vstack(rows)], step=trainer.global_step)
+            return
         trainer.logger.experiment.log_image(
             trainer.logger.run_id, np.vstack(rows), artifact_file=f"samples/epoch_{trainer.current_epoch:03d}.png"
         )

@@ -20,7 +20,7 @@ import torch
 import torch.nn.functional as F
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import ModelCheckpoint
-from lightning.pytorch.loggers import MLFlowLogger
+from lightning.pytorch.loggers import Logger, MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.data.datamodule import OffroadDataModule
@@ -47,17 +47,26 @@ from offroad_path.world.classes import CLASS_NAMES
 log = logging.getLogger(__name__)
 
 
-def training_logger(cfg: DictConfig, run_name: str, tags: dict, params: dict) -> MLFlowLogger | None:
-    """The run's Lightning logger from conf/logger, with the experiment's name in its tags, a child
-    of its sweep in a multirun, with `params` logged; None when mlflow.enabled is false."""
-    if not cfg.mlflow.enabled:
+def training_logger(cfg: DictConfig, run_name: str, tags: dict, params: dict) -> Logger | None:
+    """The run's Lightning logger from conf/logger (mlflow, csv or wandb), named `run_name`, tagged
+    with `tags` and the experiment's name, with `params` logged. MLflow's run is a child of its
+    sweep in a multirun, and there is none when mlflow.enabled is false; logger=null logs nothing."""
+    if cfg.logger is None:
         return None
     tags = {**tags, "experiment_name": cfg.experiment_name}
-    if parent := multirun_parent(cfg):
-        tags["mlflow.parentRunId"] = parent
-    # The tracking URI is always explicit: Lightning's logger would otherwise fall back to ./mlruns.
-    experiment_id(cfg.mlflow)  # created with its artifact location, which the logger would not set
-    logger = instantiate(cfg.logger, run_name=run_name, tracking_uri=tracking_uri(cfg.mlflow), tags=tags)
+    target = cfg.logger["_target_"]
+    if target.endswith(".MLFlowLogger"):
+        if not cfg.mlflow.enabled:
+            return None
+        if parent := multirun_parent(cfg):
+            tags["mlflow.parentRunId"] = parent
+        # The tracking URI is always explicit: Lightning's logger would otherwise fall back to ./mlruns.
+        experiment_id(cfg.mlflow)  # created with its artifact location, which the logger would not set
+        logger = instantiate(cfg.logger, run_name=run_name, tracking_uri=tracking_uri(cfg.mlflow), tags=tags)
+    elif target.endswith(".WandbLogger"):
+        logger = instantiate(cfg.logger, name=run_name, tags=[f"{k}={v}" for k, v in tags.items()])
+    else:  # a logger that writes folders (CSVLogger, TensorBoardLogger): one per stage and run
+        logger = instantiate(cfg.logger, name=run_name.replace(" ", "/"))
     logger.log_hyperparams(flatten(params))
     return logger
 
@@ -130,7 +139,7 @@ def fit(
     task: BaseTask,
     data: L.LightningDataModule,
     spec: RunSpec,
-    logger: MLFlowLogger | None,
+    logger: Logger | None,
 ) -> dict:
     """Train `task` (early stopping on task.monitor), test its best weights, and write spec.out_dir
     atomically: checkpoints/best.ckpt (weights and hyper-parameters only), metrics.json, and
@@ -183,7 +192,7 @@ def fit(
         if spec.write_more is not None:
             metrics.update(spec.write_more(task, data, tmp))
         (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    if logger is not None:
+    if isinstance(logger, MLFlowLogger):
         logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
         logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
     return metrics
