@@ -249,6 +249,9 @@ class LabelConfig:
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     disparity: DisparityConfig = field(default_factory=DisparityConfig)
     workers: int = setting(at_least(0))
+    shards: int = setting(at_least(1))  # label.shard of label.shards: this job labels every shards-th sequence (labelling/shards.py)
+    shard: int = setting(at_least(0))
+    merge_from: str | None = None  # a folder of shard folders to merge into out_dir, instead of labelling
 
 
 @dataclass

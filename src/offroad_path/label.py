@@ -7,18 +7,25 @@ Reads every sequence under label.in_dir and writes, per sequence, under label.ou
 label/NNNNNN.png (0/255 path masks at each f0), disparity/NNNNNN.png (StereoSGBM of f0, KITTI
 format: uint16 = 256 x disparity), poses_vo.txt and steps.csv (with VO), report.csv (every
 segment, kept or dropped and why); and summary.json for the run, metrics for DVC and MLflow.
+
+Across machines: label.shards=N label.shard=i labels every N-th sequence from the i-th into a
+folder of its own, and label.merge_from=FOLDER merges those into what one run writes, byte for
+byte (labelling/shards.py).
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import shutil
+from contextlib import nullcontext
 from pathlib import Path
 
 import cv2
 import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.labelling import shards
 from offroad_path.labelling.labeller import check_inputs, label_sequence
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.sequence.reader import find_sequences, open_sequence
@@ -69,9 +76,35 @@ def offset_metrics(summaries: list[dict]) -> dict[str, float]:
     return metrics
 
 
+def run_metrics(summaries: list[dict], in_dir: Path) -> dict:
+    """The run's metrics from its sequences' summaries; ValueError when no label could be made."""
+    drifts = [s["drift"] for s in summaries if s["drift"]]
+    metrics = {
+        "sequences": len(summaries),
+        "labels": sum(s["kept"] for s in summaries),
+        "segments_dropped": sum(s["dropped"] for s in summaries),
+        "vo_failed_steps": sum(s.get("vo_failed_steps", 0) for s in summaries),
+        "warnings": sum(len(s["warnings"]) for s in summaries),
+    }
+    if any("vo_fallbacks" in s for s in summaries):
+        for name in FALLBACKS:
+            metrics[f"vo_{name}"] = sum(s["vo_fallbacks"][name] for s in summaries if "vo_fallbacks" in s)
+    if drifts:
+        metrics |= drift_metrics(drifts)
+    metrics |= offset_metrics(summaries)
+    if not metrics["labels"]:
+        raise ValueError(f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"]))
+    return metrics
+
+
+def sharded(cfg: DictConfig) -> bool:
+    return cfg.label.shards > 1
+
+
 def outputs(cfg: DictConfig) -> Outputs:
     c = cfg.label
-    return Outputs("label", folders={"label.out_dir": c.out_dir}, files={"label.metrics_path": c.metrics_path}, inputs=[c.in_dir])
+    files = {} if sharded(cfg) else {"label.metrics_path": c.metrics_path}  # a shard's metrics stay in its folder
+    return Outputs("label", folders={"label.out_dir": c.out_dir}, files=files, inputs=[c.in_dir, c.merge_from])
 
 
 @reads("label", "mlflow", writes=outputs)
@@ -79,45 +112,45 @@ def label(cfg: DictConfig) -> dict:
     in_dir, out_dir = Path(cfg.label.in_dir), Path(cfg.label.out_dir)
     if cfg.label.strategy == "stride" and cfg.label.stride_m > cfg.label.distance_m:
         raise ConfigValueError(f"label.stride_m={cfg.label.stride_m:g}: must be at most label.distance_m ({cfg.label.distance_m:g})")
+    if cfg.label.merge_from and sharded(cfg):
+        raise ConfigValueError(f"label.merge_from={cfg.label.merge_from}: merges every shard; leave label.shards at 1")
     roots = find_sequences(in_dir)
-    for root in roots:  # validate everything before any work
-        check_inputs(open_sequence(root), cfg.label)
     names = sequence_names(roots, in_dir)
-    with stage_run(cfg, "label") as run, atomic_directory(out_dir, "label", key="label.out_dir") as tmp:
-        jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
-        summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots])
-        drifts = [s["drift"] for s in summaries if s["drift"]]
-        metrics = {
-            "sequences": len(summaries),
-            "labels": sum(s["kept"] for s in summaries),
-            "segments_dropped": sum(s["dropped"] for s in summaries),
-            "vo_failed_steps": sum(s.get("vo_failed_steps", 0) for s in summaries),
-            "warnings": sum(len(s["warnings"]) for s in summaries),
-        }
-        if any("vo_fallbacks" in s for s in summaries):
-            for name in FALLBACKS:
-                metrics[f"vo_{name}"] = sum(s["vo_fallbacks"][name] for s in summaries if "vo_fallbacks" in s)
-        if drifts:
-            metrics |= drift_metrics(drifts)
-        metrics |= offset_metrics(summaries)
-        if not metrics["labels"]:
-            raise ValueError(
-                f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"])
-            )
+    if cfg.label.merge_from:
+        merged = shards.read_shards(cfg.label, names)
+    else:
+        picked = shards.chosen(names, cfg.label)
+        roots, names = [roots[i] for i in picked], [names[i] for i in picked]
+        for root in roots:  # validate everything before any work
+            check_inputs(open_sequence(root), cfg.label)
+    with stage_run(cfg, "label") if not sharded(cfg) else nullcontext() as run, \
+            atomic_directory(out_dir, "label", key="label.out_dir") as tmp:  # fmt: skip
+        if cfg.label.merge_from:
+            for folder, summary in merged:
+                shutil.copytree(folder / summary["name"], tmp / summary["name"])
+            summaries = [summary for _, summary in merged]
+        else:
+            jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
+            summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots])
+        metrics = run_metrics(summaries, in_dir)
         (tmp / "summary.json").write_text(json.dumps({"metrics": metrics, "sequences": summaries}, indent=2) + "\n")
-        # Before the labels replace the last run's: a metrics file that cannot be written (a full
-        # disk) leaves both as they were.
-        write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n", "label")
+        if sharded(cfg):
+            (tmp / shards.SHARD_FILE).write_text(shards.shard_record(cfg.label, names))
+        else:
+            # Before the labels replace the last run's: a metrics file that cannot be written (a full
+            # disk) leaves both as they were.
+            write_text_atomic(cfg.label.metrics_path, json.dumps(metrics, indent=2) + "\n", "label")
         if run is not None:
             import mlflow
 
             mlflow.log_metrics(metrics)
             mlflow.log_artifact(str(tmp / "summary.json"))
     log.info(
-        "labelled %d sequences: %d segments kept, %d dropped, %d labels written to %s%s",
-        metrics["sequences"], metrics["labels"], metrics["segments_dropped"], metrics["labels"], out_dir,
+        "labelled %d sequences%s: %d segments kept, %d dropped, %d labels written to %s%s",
+        metrics["sequences"], f" (shard {cfg.label.shard} of {cfg.label.shards})" if sharded(cfg) else "",
+        metrics["labels"], metrics["segments_dropped"], metrics["labels"], out_dir,
         f"; VO drift {metrics['translation_drift_pct']:.2f} % (worst sequence {metrics['translation_drift_pct_worst']:.2f} %), "
-        f"{metrics['rotation_drift_deg_per_m']:.4f} deg/m" if drifts else "",
+        f"{metrics['rotation_drift_deg_per_m']:.4f} deg/m" if "translation_drift_pct" in metrics else "",
     )  # fmt: skip
     return metrics
 
