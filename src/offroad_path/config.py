@@ -318,6 +318,7 @@ class TrainerConfig:
     devices: str = MISSING
     strategy: str = MISSING  # ddp across GPUs (trainer=ddp)
     num_nodes: int = MISSING
+    sync_batchnorm: bool = MISSING  # batch norm's statistics over the global batch (trainer=ddp)
     precision: str = MISSING
     deterministic: bool = MISSING
     log_every_n_steps: int = setting(at_least(1))

@@ -34,6 +34,7 @@ from offroad_path.errors import EXIT_BAD_INPUT, clear_errors, missing_extra, one
 from offroad_path.utils.atomic import remove_unfinished
 from offroad_path.utils.outputs import Outputs, claimed, release_locks
 from offroad_path.utils.parallel import stop_workers
+from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.threads import set_threads
 
 log = logging.getLogger("offroad_path")
@@ -66,7 +67,7 @@ def reads(*groups: str, writes: Callable[[DictConfig], Outputs] | None = None) -
         @functools.wraps(stage)
         def run(cfg: DictConfig) -> Any:
             own = stage_config(cfg, groups, stage.__name__)
-            if writes is None:
+            if writes is None or not is_global_zero():  # another rank of a DDP run: it writes nothing
                 return stage(own)
             with claimed(writes(own)):
                 return stage(own)

@@ -49,6 +49,6 @@ class SteeringTask(BaseTask):
         loss = self.loss(predicted, batch["steering"], batch.get("weight"))
         mae = self.mae[f"{split}_mae"]
         mae.update(predicted, batch["steering"])
-        self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(predicted))
-        self.log(f"{split}/mae", mae, on_step=False, on_epoch=True)
+        self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(predicted), sync_dist=True)
+        self.log(f"{split}/mae", mae, on_step=False, on_epoch=True, sync_dist=True)
         return loss

@@ -41,6 +41,7 @@ from offroad_path.training.pretrained import initialise
 from offroad_path.training.task import BaseTask, SegmentationTask
 from offroad_path.utils.atomic import MARKER, atomic_directory, owned
 from offroad_path.utils.outputs import Outputs
+from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 from offroad_path.world.classes import CLASS_NAMES
 
@@ -51,7 +52,7 @@ def training_logger(cfg: DictConfig, run_name: str, tags: dict, params: dict) ->
     """The run's Lightning logger from conf/logger (mlflow, csv or wandb), named `run_name`, tagged
     with `tags` and the experiment's name, with `params` logged. MLflow's run is a child of its
     sweep in a multirun, and there is none when mlflow.enabled is false; logger=null logs nothing."""
-    if cfg.logger is None:
+    if cfg.logger is None or not is_global_zero():  # Lightning logs from rank 0 only
         return None
     tags = {**tags, "experiment_name": cfg.experiment_name}
     target = cfg.logger["_target_"]
@@ -117,7 +118,7 @@ def resume_checkpoint(work: Path, key: str, resume: bool) -> str | None:
     clears the folder first). A corrupt or foreign last.ckpt is a CheckpointError naming it."""
     last = work / "last.ckpt"
     if not resume:
-        if owned(work):
+        if owned(work) and is_global_zero():  # the other ranks of a DDP run start after rank 0 cleared it
             shutil.rmtree(work)
         return None
     if not last.is_file():
@@ -153,7 +154,7 @@ def fit(
     key = spec.key
     work = spec.out_dir.parent / ".resume" / f"{spec.out_dir.name}-{key}"
     resume = resume_checkpoint(work, key, cfg.resume)
-    if not cfg.trainer.fast_dev_run:
+    if not cfg.trainer.fast_dev_run and is_global_zero():
         work.mkdir(parents=True, exist_ok=True)
         (work / MARKER).write_text(f"{spec.stage} resume\n")
         warnings.filterwarnings("ignore", message="Checkpoint directory .* exists and is not empty")  # the marker, or a resume
@@ -183,7 +184,11 @@ def fit(
     if spec.validate and best.best_model_path:
         load_weights(task, best.best_model_path)
         best_score = float(best.best_model_score) if best.best_model_score is not None else None
-    tested = trainer.test(task, data, verbose=False)[0]
+    tested = trainer.test(task, data, verbose=False)[0]  # under DDP, each rank tests its share; the metrics are synced
+    if not trainer.is_global_zero:
+        # Another rank of a DDP run has done its part: rank 0 writes the outputs (and the stage's
+        # code after fit runs there only).
+        raise SystemExit(0)
     metrics = {f"best_{task.monitor.replace('/', '_')}": best_score,
                "epochs": trainer.current_epoch, "global_step": trainer.global_step, **{k: float(v) for k, v in tested.items()}}  # fmt: skip
     with atomic_directory(spec.out_dir, spec.stage, key=spec.out_key) as tmp:

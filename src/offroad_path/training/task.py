@@ -134,7 +134,7 @@ class SegmentationTask(BaseTask):
         loss = self.loss(scores, batch["target"])
         metrics = {"train": self.train_metrics, "val": self.val_metrics, "test": self.test_metrics}[split]
         metrics.update(scores.argmax(dim=1), batch["target"])
-        self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(scores))
+        self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(scores), sync_dist=True)
         self.log_dict(metrics, on_step=False, on_epoch=True)
         return loss
 
