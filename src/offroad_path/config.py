@@ -464,6 +464,22 @@ class DriveConfig:
 
 
 @dataclass
+class RosOutputConfig:
+    """predict with a bag input: the output bag's topics and the vehicle that steers by it."""
+
+    namespace: str = MISSING
+    frame_id: str | None = MISSING  # None: the left image's frame_id
+    steering: str = setting(one_of(("ackermann", "twist")))
+    speed_mps: float = setting(at_least(0))
+    camera_height_m: float | None = setting(positive())  # None: ingest.footprint's
+    camera_pitch_deg: float | None = MISSING  # of the raw left camera, down; None: ingest.footprint's
+    wheelbase_m: float = setting(positive())
+    rear_axle_behind_camera_m: float = setting(at_least(0))
+    lookahead_m: float = setting(positive())
+    jpeg_quality: int = setting(between(1, 100))
+
+
+@dataclass
 class PredictConfig:
     """Run a trained path model on new footage."""
 
@@ -479,6 +495,7 @@ class PredictConfig:
     max_image_pixels: int = setting(at_least(1))
     device: str = MISSING
     threads: str = setting(THREADS)  # free (default): the cores not busy when predict starts
+    ros: RosOutputConfig = field(default_factory=RosOutputConfig)
 
 
 @dataclass

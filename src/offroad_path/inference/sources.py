@@ -1,13 +1,16 @@
-"""Where predict's frames come from: a folder of images, a stereo sequence, or a video file."""
+"""Where predict's frames come from: a folder of images, a stereo sequence, a video file, or a ROS
+bag (ROS 1, ROS 2 or MCAP; its stereo pair rectified as ingest rectifies it)."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
+from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.errors import InputError
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
@@ -21,26 +24,37 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 class Frame:
     name: str  # output file stem
     image: np.ndarray  # RGB (H, W, 3) uint8
-    depth: np.ndarray | None = None  # metres (H, W), 0 unknown; stereo sequences only
+    depth: np.ndarray | None = None  # metres (H, W), 0 unknown; stereo sequences and bags only
+    header: Any = None  # a bag's: the left image message's std_msgs/Header (stamp, frame_id)
 
 
 @dataclass
 class FrameSource:
-    kind: str  # folder | sequence | video
+    kind: str  # folder | sequence | video | bag
     path: Path
-    count: int
+    count: int | None  # None: unknown until read
     fps: float | None
     frames: Iterator[Frame]
+    K: np.ndarray | None = None  # a bag's rectified left camera (3, 3), at the frames' size
+    pitch_change_deg: float = 0.0  # a bag's: how much further down the rectified camera looks than the raw one
 
 
-def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = None, max_pixels: int = MAX_IMAGE_PIXELS) -> FrameSource:
-    """Frames of `path`; stereo depth (StereoSGBM with disparity_cfg) for sequences when given a config.
-    Every image's declared size is checked against max_pixels before anything is decoded."""
+def is_bag(path: Path) -> bool:
+    return path.suffix.lower() in (".bag", ".mcap") if path.is_file() else (path / "metadata.yaml").is_file()
+
+
+def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = None, max_pixels: int = MAX_IMAGE_PIXELS,
+                ingest: DictConfig | None = None) -> FrameSource:  # fmt: skip
+    """Frames of `path`; stereo depth (StereoSGBM with disparity_cfg) for sequences and bags when
+    given a config. Every image's declared size is checked against max_pixels before anything is
+    decoded. A bag is read with `ingest`'s topics, calibration and rectified size."""
     path = Path(path)
     if not path.exists():
-        raise FileNotFoundError(f"{path}: no such folder or video file")
+        raise FileNotFoundError(f"{path}: no such folder, video or bag")
     if path.is_dir() and (path / "calib.txt").is_file():
         return _sequence(path, disparity_cfg, max_frames, max_pixels)
+    if is_bag(path):
+        return _bag(path, ingest, disparity_cfg, max_frames)
     if path.is_dir():
         return _folder(path, max_frames, max_pixels)
     return _video(path, max_frames, max_pixels)
@@ -105,6 +119,43 @@ def _sequence(path: Path, disparity_cfg, max_frames: int | None, max_pixels: int
             yield Frame(f"{i:06d}", seq.load_left(i), depth)
 
     return FrameSource("sequence", path, n, fps, frames())
+
+
+def _bag(path: Path, ingest: DictConfig, disparity_cfg, max_frames: int | None) -> FrameSource:
+    """The bag's stereo pairs, rectified at ingest.width x ingest.height; the pair's topics from
+    ingest.topics, or found by themselves (Bag.stereo_pair)."""
+    from offroad_path.recordings.bags import Bag
+    from offroad_path.recordings.rectify import Rectifier
+    from offroad_path.recordings.sources import BagSource
+
+    topics = {"left": ingest.topics.left, "right": ingest.topics.right}
+    if not (topics["left"] and topics["right"]) and not ingest.calibration:
+        with Bag(path) as bag:
+            topics["left"], topics["right"] = bag.stereo_pair()
+    source = BagSource(OmegaConf.merge(ingest, {"bag": str(path), "topics": topics}))
+    try:
+        rectify = Rectifier(source.rig, source.input_size, (ingest.width, ingest.height), ingest.alpha)
+    except BaseException:
+        source.close()
+        raise
+    matcher, calibration = (sgbm(disparity_cfg) if disparity_cfg is not None else None), rectify.calibration
+
+    def frames() -> Iterator[Frame]:
+        try:
+            for i, (_, header, raw_left, raw_right) in enumerate(source.headed_pairs(lambda t: True)):
+                if max_frames is not None and i >= max_frames:
+                    break
+                left, right = rectify(raw_left, raw_right)
+                grey = [image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) for image in (left, right)]
+                depth = None
+                if matcher is not None:
+                    depth = depth_from_disparity(compute_disparity(matcher, *grey), calibration.fx, calibration.baseline_m)
+                rgb = cv2.cvtColor(left, cv2.COLOR_GRAY2RGB if left.ndim == 2 else cv2.COLOR_BGR2RGB)
+                yield Frame(f"{i:06d}", rgb, depth, header)
+        finally:
+            source.close()
+
+    return FrameSource("bag", path, None, None, frames(), calibration.K, rectify.pitch_change_deg)
 
 
 def _video(path: Path, max_frames: int | None, max_pixels: int) -> FrameSource:

@@ -88,6 +88,22 @@ class Bag:
             return self._reader.deserialize(raw, connection.msgtype)
         raise InputError(self.path, f"topic {topic} ({role}) has no messages")
 
+    def stereo_pair(self) -> tuple[str, str]:
+        """The (left, right) image topics of a bag with exactly two image topics that each have a
+        CameraInfo beside them; left is the camera whose projection has no baseline term (P's Tx = 0,
+        the right camera's is -fx * B). InputError listing the image topics otherwise."""
+        topics = self.topics()
+        images = [t for t, (m, _) in topics.items() if m in IMAGE_TYPES and topics.get(info_topic_for(t), ("",))[0] == INFO_TYPE]
+        if len(images) != 2:
+            listing = ", ".join(t for t, (m, _) in topics.items() if m in IMAGE_TYPES) or "none"
+            raise InputError(self.path, f"holds {len(images)} image topics with a CameraInfo beside them, not one stereo pair "
+                                        f"(its image topics: {listing}); give ingest.topics.left and ingest.topics.right")  # fmt: skip
+        tx = [float(self.first(info_topic_for(t), (INFO_TYPE,), "CameraInfo").p[3]) for t in images]
+        if tx[0] == tx[1]:
+            raise InputError(self.path, f"{images[0]} and {images[1]} have the same CameraInfo baseline term (P[3] = {tx[0]}): "
+                                        "which is left is unknown; give ingest.topics.left and ingest.topics.right")  # fmt: skip
+        return (images[0], images[1]) if tx[0] > tx[1] else (images[1], images[0])
+
     def rig(self, left_info: str, right_info: str) -> StereoRig:
         infos = [
             camera_info_dict(self.first(topic, (INFO_TYPE,), f"{side} CameraInfo"))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from omegaconf import DictConfig
@@ -73,6 +74,11 @@ class BagSource:
 
     def pairs(self, keep: Callable[[float], bool]) -> Frames:
         """The synchronised pairs; only the kept ones are decoded."""
+        for t, _, left, right in self.headed_pairs(keep):
+            yield t, left, right
+
+    def headed_pairs(self, keep: Callable[[float], bool]) -> Iterator[tuple[float, Any, np.ndarray, np.ndarray]]:
+        """As pairs, with the left message's header (its exact stamp and frame_id) second."""
         messages = self.bag.stereo_messages(self.names["left"], self.names["right"])
         for t, left, right in pair_by_stamp(messages, self.c.sync_tolerance_s, self.stats, self.names, self.path):
             if keep(t):
@@ -81,7 +87,7 @@ class BagSource:
                     size = f"{pair[0].shape[1]}x{pair[0].shape[0]}"
                     first = f"{self.input_size[0]}x{self.input_size[1]}"
                     raise InputError(self.path, f"the frames at {t:.6f} s are {size}, the stream's first {first}: one recording, one size")
-                yield t, *pair
+                yield t, left.header, *pair
         check_pairing(self.stats, self.c.max_unpaired_fraction, self.c.sync_tolerance_s, self.names, self.path)
 
     def camera_poses(self, times: np.ndarray) -> np.ndarray | None:

@@ -27,9 +27,9 @@ class GroundCamera:
     pitch_deg: float
     rear_axle_behind_m: float  # how far the rear axle is behind the camera, along the vehicle's axis
 
-    def to_ground(self, pixels: np.ndarray) -> np.ndarray:
-        """(N, 2) pixels (u, v) to (M, 2) ground points (x right, z forward) from the rear axle, in
-        metres; pixels at or above the horizon are dropped."""
+    def _hits(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rays (camera frame) of the pixels below the horizon and each one's ground point in the
+        level frame (x right, y down, z forward), as (M, 3) each."""
         rays = np.linalg.solve(self.K, np.c_[pixels, np.ones(len(pixels))].T).T  # camera frame, y down
         tilt = math.radians(self.pitch_deg)
         # camera = rotation @ level, the rotation of labelling.footprint; level = rotation.T @ camera
@@ -37,7 +37,18 @@ class GroundCamera:
         level = rays @ rotation
         below = level[:, 1] > 1e-6
         t = self.height_m / level[below, 1]
-        return np.stack([t * level[below, 0], t * level[below, 2] + self.rear_axle_behind_m], axis=1)
+        return rays[below] * t[:, None], level[below] * t[:, None]
+
+    def to_ground(self, pixels: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels (u, v) to (M, 2) ground points (x right, z forward) from the rear axle, in
+        metres; pixels at or above the horizon are dropped."""
+        level = self._hits(pixels)[1]
+        return np.stack([level[:, 0], level[:, 2] + self.rear_axle_behind_m], axis=1)
+
+    def to_camera(self, pixels: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels to (M, 3) points where their rays meet the ground, in the camera's frame
+        (x right, y down, z forward; metres); pixels at or above the horizon are dropped."""
+        return self._hits(pixels)[0]
 
 
 def centre_line(path: np.ndarray) -> np.ndarray:
