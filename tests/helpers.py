@@ -128,10 +128,10 @@ def dvc(repo: Path, *args: str) -> str:
     return run.stdout
 
 
-def dvc_at_once(repos: list[Path], *args: str) -> list[str]:
-    """The same dvc command in several repositories at the same time (their stages are mostly
-    single-threaded start-up: two at once take little longer than one)."""
-    runs = [subprocess.Popen(**_dvc_command(repo, *args), stdout=subprocess.PIPE, stderr=subprocess.PIPE) for repo in repos]
+def dvc_at_once(commands: list[tuple[Path, list[str]]]) -> list[str]:
+    """dvc commands, each (repository, arguments), in several repositories at the same time (their
+    stages are mostly single-threaded start-up: two at once take little longer than one)."""
+    runs = [subprocess.Popen(**_dvc_command(repo, *args), stdout=subprocess.PIPE, stderr=subprocess.PIPE) for repo, args in commands]
     outputs = [run.communicate() for run in runs]
     for run, (out, err) in zip(runs, outputs, strict=True):
         assert run.returncode == 0, out + err

@@ -170,18 +170,18 @@ def saved_epochs(out: Path) -> int:
     return 0
 
 
-@pytest.mark.slow(seconds=115)
+@pytest.mark.slow(seconds=70)
 def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(split_dir, tiny_overrides, tmp_path):
     def args(out: Path) -> list[str]:
         return ["offroad_path.train", *tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={out / 'run'}", "model=unet",
-                "trainer.max_epochs=10", "callbacks.early_stopping.patience=10", "mlflow.enabled=false"]  # fmt: skip
+                "trainer.max_epochs=6", "callbacks.early_stopping.patience=10", "mlflow.enabled=false"]  # fmt: skip
 
     reference = tmp_path / "reference"
     finish(args(reference))
     expected = files(reference / "run")
     assert json.loads((reference / "run" / "metrics.json").read_text())["global_step"] > 0
     # (signal, epochs saved before it, then a delay): before any checkpoint, and mid-way through later epochs
-    points = [(signal.SIGKILL, 0, 2.0), (signal.SIGKILL, 1, 0.0), (signal.SIGTERM, 3, 0.0), (signal.SIGKILL, 5, 0.05)]
+    points = [(signal.SIGKILL, 0, 2.0), (signal.SIGKILL, 1, 0.05), (signal.SIGTERM, 3, 0.0)]
     for i, (how, epochs, delay) in enumerate(points):
         out = tmp_path / f"run{i}"
         interrupt(args(out), how, delay, ready=lambda out=out, epochs=epochs: saved_epochs(out) >= epochs)

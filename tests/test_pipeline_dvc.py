@@ -21,21 +21,12 @@ def repo_copy(tmp_path) -> Path:
     return tiny_repo(tmp_path / "repo")
 
 
-def narrowed(repo: Path, architecture: str) -> Path:
-    """`repo` with a one-architecture grid: its pipeline has each kind of stage once or twice."""
-    grid = repo / "conf" / "evaluate" / "default.yaml"
-    text = grid.read_text()
-    assert "architectures: [segnet, fcn, unet]\n" in text
-    grid.write_text(text.replace("architectures: [segnet, fcn, unet]\n", f"architectures: [{architecture}]\n"))
-    return repo
-
-
 def lock_entries(repo: Path) -> dict:
     return yaml.safe_load((repo / "dvc.lock").read_text())["stages"]
 
 
-def check_closed_loop(repo: Path, elsewhere: Path, steering: dict) -> None:
-    """train_steering_slip and drive, against their contracts and the other place's run."""
+def check_closed_loop(repo: Path, steering: dict) -> None:
+    """train_steering_slip and drive, against their contracts."""
     slippery = json.loads((repo / "metrics" / "steering_slip.json").read_text())
     # the same frames, each steered at least as hard (the factors are at most 1), some harder
     assert slippery["test_frames"] == steering["test_frames"]
@@ -45,16 +36,16 @@ def check_closed_loop(repo: Path, elsewhere: Path, steering: dict) -> None:
     assert {a: list(drove[a]["policies"]) for a in ("steering", "vehicle", "traction")} == {
         "steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet"],
         "traction": ["unet-segmentation", "pilotnet_slip"]}  # fmt: skip
-    assert drove == json.loads((elsewhere / "metrics" / "drive.json").read_text())
     assert {p.name for p in (repo / "data" / "drive" / "trajectories").iterdir()} == {"steering", "vehicle", "traction"}
 
 
 @pytest.mark.slow(seconds=240)
 def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, monkeypatch):
-    # A clone elsewhere, deeper, at the same time (on the U-Net column of the grid only, to save
-    # the suite's time), must reproduce every stage's hashes: no output depends on the path.
-    elsewhere = narrowed(tiny_repo(repo_copy.parent / "another" / "place" / "repo"), "unet")
-    out, _ = dvc_at_once([repo_copy, elsewhere], "repro")
+    # A clone elsewhere, deeper, at the same time, must reproduce the hashes of the stages that
+    # write paths (the split's manifests, a checkpoint's config): no output depends on the path.
+    # (Up to one training run only, to save the suite's time.)
+    elsewhere = tiny_repo(repo_copy.parent / "another" / "place" / "repo")
+    out, _ = dvc_at_once([(repo_copy, ["repro"]), (elsewhere, ["repro", "train_scratch@unet-0"])])
     ran = set(re.findall(r"Running stage '([^']+)'", out))
     stages = {"synthesize", "label", "split", "evaluate", "train_steering", "train_steering_slip", "drive"}
     stages |= {f"pretrain@{m}" for m in MODELS}
@@ -62,14 +53,9 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     stages |= {f"postprocess@{m}-{p}-0" for m in MODELS for p in ("none", "segmentation")}
     assert ran == stages
     here, there = lock_entries(repo_copy), lock_entries(elsewhere)
-    assert set(there) == {s for s in stages if "@" not in s or "unet" in s}
-    for stage in set(there) - {"evaluate", "drive"}:  # their params and outputs hold the grid
+    assert set(there) == {"synthesize", "label", "split", "train_scratch@unet-0"}
+    for stage in there:
         assert there[stage] == here[stage], stage
-    scores, all_scores = (json.loads((r / "metrics" / "evaluation.json").read_text()) for r in (elsewhere, repo_copy))
-    for run in ("unet-none", "unet-segmentation"):
-        assert scores[run] == all_scores[run]
-        assert scores["steering_from_paths"][run] == all_scores["steering_from_paths"][run]
-    assert scores["baselines"] == {key: all_scores["baselines"][key] for key in scores["baselines"]}  # those of its runs
     worlds = json.loads((repo_copy / "data" / "synthetic" / "summary.json").read_text())["test_worlds"]
     assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2 + len(worlds) and worlds  # two drives, held-out test worlds
     assert json.loads((repo_copy / "metrics" / "label.json").read_text())["labels"] > 0
@@ -94,7 +80,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     assert {p.name for p in (repo_copy / "data" / "evaluation" / "figures").iterdir()} == {"good_and_bad_cases.png", "postprocessing.png"}
     steering = json.loads((repo_copy / "metrics" / "steering.json").read_text())
     assert steering["test_frames"] > 0 and 0 <= steering["mean_absolute_error"] <= 2
-    check_closed_loop(repo_copy, elsewhere, steering)
+    check_closed_loop(repo_copy, steering)
     assert "segnet-none" in dvc(repo_copy, "metrics", "show")
     assert "Data and pipelines are up to date" in dvc(repo_copy, "repro")
     # A U-Net setting, changed by a DVC experiment, reruns the U-Net stages and nothing else.
