@@ -251,7 +251,7 @@ class LabelConfig:
     workers: int = setting(at_least(0))
     shards: int = setting(at_least(1))  # label.shard of label.shards: this job labels every shards-th sequence (labelling/shards.py)
     shard: int = setting(at_least(0))
-    merge_from: str | None = None  # a folder of shard folders to merge into out_dir, instead of labelling
+    merge_from: str | None = MISSING  # a folder of shard folders to merge into out_dir, instead of labelling
 
 
 @dataclass

@@ -76,8 +76,9 @@ def offset_metrics(summaries: list[dict]) -> dict[str, float]:
     return metrics
 
 
-def run_metrics(summaries: list[dict], in_dir: Path) -> dict:
-    """The run's metrics from its sequences' summaries; ValueError when no label could be made."""
+def run_metrics(summaries: list[dict], in_dir: Path, need_labels: bool = True) -> dict:
+    """The run's metrics from its sequences' summaries; ValueError when no label could be made and
+    `need_labels` (a shard may have none: the run is judged when the shards are merged)."""
     drifts = [s["drift"] for s in summaries if s["drift"]]
     metrics = {
         "sequences": len(summaries),
@@ -92,7 +93,7 @@ def run_metrics(summaries: list[dict], in_dir: Path) -> dict:
     if drifts:
         metrics |= drift_metrics(drifts)
     metrics |= offset_metrics(summaries)
-    if not metrics["labels"]:
+    if need_labels and not metrics["labels"]:
         raise ValueError(f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"]))
     return metrics
 
@@ -132,7 +133,7 @@ def label(cfg: DictConfig) -> dict:
         else:
             jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
             summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots])
-        metrics = run_metrics(summaries, in_dir)
+        metrics = run_metrics(summaries, in_dir, need_labels=not sharded(cfg))
         (tmp / "summary.json").write_text(json.dumps({"metrics": metrics, "sequences": summaries}, indent=2) + "\n")
         if sharded(cfg):
             (tmp / shards.SHARD_FILE).write_text(shards.shard_record(cfg.label, names))
