@@ -167,7 +167,7 @@ def inspect(labels: Path, recording: Path | None, out: Path, every: int = 4) -> 
             if it.footprint is not None:
                 checks[name] = it.check.verdict(it.footprint.camera_height_m)
                 checks[name]["curve_depth"], checks[name]["curve_ratio"] = ratio_curve(it.check, np.arange(2.0, 16.0, 1.0))
-        summary_figure(labels.name, runs, checks, tmp / "summary.png")
+        summary_figure(str(labels), runs, checks, tmp / "summary.png")
         (tmp / "checks.json").write_text(json.dumps(checks, indent=2) + "\n")
     for name, check in checks.items():
         for flag in check["flags"]:

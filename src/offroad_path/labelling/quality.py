@@ -123,7 +123,7 @@ def summary_figure(name: str, runs: dict[str, LabelRun], checks: dict[str, dict]
             ax.plot(drift, marker=".", label=seq)
     ax.set(title="VO drift per segment (against the recording's poses)", xlabel="segment (by f0)", ylabel="translation drift, %")
     if ax.lines:
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6, ncol=3)
     else:
         ax.text(0.5, 0.5, "no recorded poses to compare with", ha="center", transform=ax.transAxes)
     ax = axes[0, 1]
@@ -150,17 +150,17 @@ def summary_figure(name: str, runs: dict[str, LabelRun], checks: dict[str, dict]
     ax.set(title="footprint against stereo: <1 sinks, >1 floats; a slope is a pitch error", xlabel="footprint depth, m",
            ylabel="median stereo / footprint depth")  # fmt: skip
     if ax.lines[1:]:
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6, ncol=3)
     ax = axes[1, 1]
     ax.axis("off")
     lines = []
     for seq, check in checks.items():
         head = f"{seq}: {check.get('pixels', 0):,} px"
         if check.get("median_ratio") is not None:
-            head += f", ratio {check['median_ratio']:.3f}, implied camera height {check['implied_camera_height_m']:.2f} m"
-        lines += [head, *(f"  FLAG {f}" for f in check["flags"])] if check["flags"] else [head, "  no flag"]
-    ax.text(0, 1, "\n".join(lines) or "no recording given: no footprint check", va="top", family="monospace", fontsize=7, wrap=True)
-    fig.suptitle(f"labels of {name}")
+            head += f", ratio {check['median_ratio']:.3f}, implied height {check['implied_camera_height_m']:.2f} m"
+        lines += [head + ("" if check["flags"] else ", no flag"), *(f"  FLAG {f}" for f in check["flags"])]
+    ax.text(0, 1, "\n".join(lines) or "no recording given: no footprint check", va="top", family="monospace", fontsize=6, wrap=True)
+    fig.suptitle(f"labels in {name}")
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
