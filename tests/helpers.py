@@ -167,3 +167,15 @@ def tiny_repo(repo: Path) -> Path:
     git(repo, "init", "-q")
     subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
     return repo
+
+
+def saved_epochs(out: Path) -> int:
+    """Epochs a training run under `out` has in its resume checkpoint so far (0 before the first)."""
+    import torch
+
+    for last in out.glob(".resume/run-*/last.ckpt"):
+        try:
+            return int(torch.load(last, map_location="cpu", weights_only=True)["epoch"]) + 1
+        except Exception:  # being replaced this very moment
+            return 0
+    return 0

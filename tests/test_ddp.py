@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from helpers import saved_epochs
 
 from offroad_path.train import train
 
@@ -23,15 +24,6 @@ ROOT = Path(__file__).resolve().parents[1]
 # augmentation and a U-Net (no dropout): what differs is batch norm's statistics, of each rank's 3
 # samples against all 6 (PyTorch's SyncBatchNorm, which trainer=ddp turns on, needs GPUs).
 SAME_STEPS = ("model=unet", "data.augment=false", "trainer.max_epochs=3", "callbacks.early_stopping.patience=10")
-
-
-def epochs_saved(out: Path) -> int:
-    for last in out.glob(".resume/run-*/last.ckpt"):
-        try:
-            return int(torch.load(last, map_location="cpu", weights_only=True)["epoch"]) + 1
-        except Exception:  # being replaced this very moment
-            return 0
-    return 0
 
 
 def weights(run: Path) -> dict[str, torch.Tensor]:
@@ -49,7 +41,7 @@ def test_two_processes_train_as_one_on_the_same_global_batch_and_resume_after_a_
     # Killed as a whole, both ranks, once the first epoch is saved.
     first = subprocess.Popen(command, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 240
-    while epochs_saved(out) < 1 and first.poll() is None and time.monotonic() < deadline:
+    while saved_epochs(out) < 1 and first.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
     assert first.poll() is None, "the run ended before the kill: the test missed its point"
     os.killpg(first.pid, signal.SIGKILL)

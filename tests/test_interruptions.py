@@ -16,8 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-import torch
-from helpers import tagged_processes
+from helpers import saved_epochs, tagged_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -158,16 +157,6 @@ def test_two_label_runs_into_one_folder_one_refused_one_complete(two_drives, tmp
     assert json.loads((tmp_path / "m.json").read_text()) == summary["metrics"]  # the metrics are those of the labels beside them
     assert summary["metrics"]["labels"] == len(list((tmp_path / "labels").glob("*/label/*.png")))
     assert not list(tmp_path.glob(".labels.*"))
-
-
-def saved_epochs(out: Path) -> int:
-    """Epochs a run under `out` has in its resume checkpoint so far (0 before the first)."""
-    for last in out.glob(".resume/run-*/last.ckpt"):
-        try:
-            return int(torch.load(last, map_location="cpu", weights_only=True)["epoch"]) + 1
-        except Exception:  # being replaced this very moment
-            return 0
-    return 0
 
 
 @pytest.mark.slow(seconds=70)
