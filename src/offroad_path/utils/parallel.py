@@ -36,8 +36,12 @@ class _Failure:
     text: str  # type, message and traceback otherwise
 
 
-def _die_with_parent() -> None:
-    """In a worker: the kernel kills it when the parent dies, even by SIGKILL (Linux)."""
+def _die_with_parent(parent: int) -> None:
+    """In a worker: the kernel kills it when the parent dies, even by SIGKILL (Linux).
+
+    A worker takes a second or more to start (it imports the stage's modules), and its first job is
+    already waiting in its pipe: one whose parent died meanwhile ends here instead of doing that job.
+    """
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which stops the workers
     try:
@@ -46,6 +50,8 @@ def _die_with_parent() -> None:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):  # not Linux: orphans end when their job does
         pass
+    if os.getppid() != parent:
+        os._exit(1)
 
 
 def _call(fn: Callable[[Any], Any], job: Any) -> Any:
@@ -59,9 +65,9 @@ def _call(fn: Callable[[Any], Any], job: Any) -> Any:
             return _Failure(None, "".join(traceback.format_exception(e)))
 
 
-def _serve(conn: Connection) -> None:
+def _serve(conn: Connection, parent: int) -> None:
     """A worker's loop: (fn, job) in, its result out, until None or the parent is gone."""
-    _die_with_parent()
+    _die_with_parent(parent)
     while True:
         try:
             message = conn.recv()
@@ -110,7 +116,7 @@ def _start(count: int) -> list[tuple[Any, Connection]]:
         started = []
         for _ in range(count):
             mine, theirs = context.Pipe()
-            process = context.Process(target=_serve, args=(theirs,), daemon=True)
+            process = context.Process(target=_serve, args=(theirs, os.getpid()), daemon=True)
             process.start()
             theirs.close()
             _ACTIVE.append(process)
