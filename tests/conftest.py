@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import sqlite3
@@ -69,15 +70,34 @@ def kitti_snippet() -> Path:
     return KITTI_SNIPPET
 
 
+def made_once(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], object]) -> Path:
+    """Folder `name`, made by make(folder) once per run: under pytest-xdist, the first worker to need
+    it makes it and the others wait for it and read it (session fixtures are otherwise made once
+    per worker, each time at the cost of both cores). Tests must not change what is in it."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if WORKERS > 1 else base  # the run's folder, above each worker's own
+    folder, done = root / "shared" / name, root / "shared" / f"{name}.done"
+    folder.parent.mkdir(exist_ok=True)
+    with open(root / "shared" / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.is_file():
+            shutil.rmtree(folder, ignore_errors=True)  # what a worker that failed making it left
+            folder.mkdir()
+            make(folder)
+            done.touch()
+    return folder
+
+
 @pytest.fixture(scope="session")
 def drive(compose_config, tmp_path_factory) -> Path:
     """A folder with one 40-frame drive (about 40 m) of the laptop world at the paper's 512 x 288,
-    rendered once per session: the odometry tests' bounds are for that size."""
+    rendered once per run: the odometry tests' bounds are for that size."""
     from offroad_path.world.record import record_sequence
 
-    root = tmp_path_factory.mktemp("world") / "recordings"
-    record_sequence(compose_config("world.frames=40", "world.width=512", "world.height=288").world, seed=21, out_dir=root / "drive")
-    return root
+    def make(root: Path) -> None:
+        record_sequence(compose_config("world.frames=40", "world.width=512", "world.height=288").world, seed=21, out_dir=root / "drive")
+
+    return made_once(tmp_path_factory, "recordings", make)
 
 
 @pytest.fixture(scope="session")
@@ -98,13 +118,14 @@ def raw_drive(drive, rig) -> list:
 
 @pytest.fixture(scope="session")
 def labelled_drive(compose_config, drive, tmp_path_factory) -> Path:
-    """The label stage's output for `drive` (VO poses), made once per session."""
+    """The label stage's output for `drive` (VO poses), made once per run."""
     from offroad_path.label import label
 
-    out = tmp_path_factory.mktemp("labelled")
-    label(compose_config(f"label.in_dir={drive}", f"label.out_dir={out / 'labels'}", f"label.metrics_path={out / 'm.json'}",
-                         "label.workers=1", "mlflow.enabled=false"))  # fmt: skip
-    return out / "labels"
+    def make(out: Path) -> None:
+        label(compose_config(f"label.in_dir={drive}", f"label.out_dir={out / 'labels'}", f"label.metrics_path={out / 'm.json'}",
+                             "label.workers=1", "mlflow.enabled=false"))  # fmt: skip
+
+    return made_once(tmp_path_factory, "labelled", make) / "labels"
 
 
 @pytest.fixture(scope="session")
@@ -112,9 +133,10 @@ def split_dir(compose_config, labelled_drive, tmp_path_factory) -> Path:
     """Manifests over `labelled_drive`, with blocks small enough that every part gets frames."""
     from offroad_path.split import split
 
-    out = tmp_path_factory.mktemp("split") / "split"
-    split(compose_config(f"split.labels_dir={labelled_drive}", f"split.out_dir={out}", "split.block_m=4", "split.guard_m=3"))
-    return out
+    def make(out: Path) -> None:
+        split(compose_config(f"split.labels_dir={labelled_drive}", f"split.out_dir={out / 'split'}", "split.block_m=4", "split.guard_m=3"))
+
+    return made_once(tmp_path_factory, "split", make) / "split"
 
 
 TINY_TRAINING = (
@@ -151,8 +173,7 @@ def trained(tiny_config, tmp_path_factory) -> tuple[Path, str, Path]:
     """(checkpoint, MLflow run id, tracking db) of a U-Net trained for one epoch on the test drive."""
     from offroad_path.train import train
 
-    out = tmp_path_factory.mktemp("trained")
-    train(tiny_config(out, "model=unet", "trainer.max_epochs=1"))
+    out = made_once(tmp_path_factory, "trained", lambda out: train(tiny_config(out, "model=unet", "trainer.max_epochs=1")))
     with sqlite3.connect(out / "mlflow.db") as db:
         (run_id,) = db.execute("select run_uuid from runs where name = 'train unet-none'").fetchone()
     return out / "run" / "checkpoints" / "best.ckpt", run_id, out / "mlflow.db"

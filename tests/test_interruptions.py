@@ -71,7 +71,7 @@ def two_drives(drive, tmp_path_factory) -> Path:
     return recordings
 
 
-@pytest.mark.slow(seconds=45)
+@pytest.mark.slow(seconds=35)
 def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_drives, tmp_path):
     def args(out: Path) -> list[str]:
         return ["offroad_path.label", f"label.in_dir={two_drives}", f"label.out_dir={out / 'labels'}",
@@ -93,8 +93,8 @@ def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_dri
 
         return ready
 
-    # From just after the temporary folder appears to 40 % of the labels written.
-    points = [(signal.SIGKILL, 0.0), (signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2)]
+    # Mid-way through the labels (a worker killed while it starts: the test of map_processes above).
+    points = [(signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2)]
     for i, (how, share) in enumerate(points):
         out = tmp_path / f"run{i}"
         interrupt(args(out), how, 0.0, ready=written(out, round(share * labels)))
@@ -194,7 +194,7 @@ def test_two_label_runs_into_one_folder_one_refused_one_complete(two_drives, tmp
     assert not list(tmp_path.glob(".labels.*"))
 
 
-@pytest.mark.slow(seconds=70)
+@pytest.mark.slow(seconds=55)
 def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(split_dir, tiny_overrides, tmp_path):
     def args(out: Path) -> list[str]:
         return ["offroad_path.train", *tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={out / 'run'}", "model=unet",
@@ -204,8 +204,9 @@ def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(spli
     finish(args(reference))
     expected = files(reference / "run")
     assert json.loads((reference / "run" / "metrics.json").read_text())["global_step"] > 0
-    # (signal, epochs saved before it, then a delay): before any checkpoint, and mid-way through later epochs
-    points = [(signal.SIGKILL, 0, 2.0), (signal.SIGKILL, 1, 0.05), (signal.SIGTERM, 3, 0.0)]
+    # (signal, epochs saved before it, then a delay): before any checkpoint, and mid-way through a
+    # later epoch (tests/test_ddp.py kills a run after its first epoch is saved)
+    points = [(signal.SIGKILL, 0, 2.0), (signal.SIGTERM, 3, 0.0)]
     for i, (how, epochs, delay) in enumerate(points):
         out = tmp_path / f"run{i}"
         interrupt(args(out), how, delay, ready=lambda out=out, epochs=epochs: saved_epochs(out) >= epochs)
