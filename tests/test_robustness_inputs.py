@@ -192,8 +192,9 @@ def test_a_manifest_listing_a_missing_file_fails_before_training(tiny_config, sp
     split_copy = copy_split(split_dir, tmp_path)
     test_csv = split_copy / "test.csv"
     rows = test_csv.read_text().splitlines()
-    missing = tmp_path / "elsewhere" / "gone.png"
-    rows[1] = rows[1].replace(rows[1].split(",")[4], str(missing))
+    label = rows[1].split(",")[4]
+    missing = Path(label).parent / "gone.png"  # beside the labels, inside the data root
+    rows[1] = rows[1].replace(label, str(missing))
     test_csv.write_text("\n".join(rows) + "\n")
     cfg = tiny_config(tmp_path, f"data.split_dir={split_copy}", "mlflow.enabled=false")
     refused(train, cfg, capsys, tmp_path, test_csv, "row 2", str(missing), "does not exist")
