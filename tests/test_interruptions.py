@@ -93,7 +93,7 @@ def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_dri
 
         return ready
 
-    # Mid-way through the labels (a worker killed while it starts: the test of map_processes above).
+    # Mid-way through the labels (a worker killed while it starts: the test of map_processes below).
     points = [(signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2)]
     for i, (how, share) in enumerate(points):
         out = tmp_path / f"run{i}"
@@ -124,16 +124,23 @@ import os, signal, sys, threading, time
 from pathlib import Path
 from offroad_path.utils.parallel import map_processes
 
-if __name__ == "__mp_main__":
-    time.sleep(3)  # a worker that starts slowly: its parent is dead before it is ready
+if __name__ == "__mp_main__":  # a worker that starts slowly: its parent is dead before it is ready
+    Path(sys.argv[1], f"started{os.getpid()}").touch()
+    time.sleep(3)
 
 
 def job(i):
     Path(sys.argv[1], f"done{i}").touch()
 
 
+def kill_once_both_started():
+    while len(list(Path(sys.argv[1]).glob("started*"))) < 2:
+        time.sleep(0.01)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
 if __name__ == "__main__":
-    threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGKILL)).start()
+    threading.Thread(target=kill_once_both_started, daemon=True).start()
     map_processes(job, [0, 1], workers=2)
 """
 
@@ -144,6 +151,7 @@ def test_a_worker_whose_parent_was_killed_while_it_started_does_not_do_its_job(t
     tag = uuid.uuid4().hex
     run = subprocess.run([sys.executable, str(script), str(tmp_path)], env={**os.environ, "OFFROAD_TEST_TAG": tag})
     assert run.returncode == -signal.SIGKILL
+    assert len(list(tmp_path.glob("started*"))) == 2  # killed while both workers were starting
     deadline = time.monotonic() + 30
     while tagged_processes(tag) and time.monotonic() < deadline:
         time.sleep(0.1)
