@@ -10,6 +10,7 @@ an error naming the key. Library code reads its settings from a composed config
 from __future__ import annotations
 
 import importlib
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +42,19 @@ def registry(module: str, name: str) -> Callable[[], list[str]]:
 
 
 PRETRAININGS = registry("training.pretrained", "CHOICES")
+
+
+@dataclass
+class PathsConfig:
+    """Where the stages read and write (conf/paths): every stage's *_dir and *_path is made from these."""
+
+    root: str = MISSING
+    data_dir: str = MISSING
+    metrics_dir: str = MISSING
+    recordings_dir: str = MISSING
+    logs_dir: str = MISSING
+    exports_dir: str = MISSING
+    predictions_dir: str = MISSING
 
 
 @dataclass
@@ -518,6 +532,7 @@ class MlflowConfig:
 
 @dataclass
 class Config:
+    paths: PathsConfig = field(default_factory=PathsConfig)
     world: WorldConfig = field(default_factory=WorldConfig)
     synthesize: SynthesizeConfig = field(default_factory=SynthesizeConfig)
     ingest: IngestConfig = field(default_factory=IngestConfig)
@@ -558,8 +573,15 @@ def run_grid(architectures: list[str], pretrainings: list[str]) -> list[str]:
     return [f"{a}-{p}" for a in architectures for p in pretrainings]
 
 
+def join_path(root: str, *parts: str) -> str:
+    """`root`/`parts`, normalised (`./data` is `data`, `~` expanded): the paths group's resolver, so
+    that the default root `.` gives the same paths, and so the same DVC outputs, as before it existed."""
+    return os.path.normpath(os.path.join(os.path.expanduser(str(root)), *map(str, parts)))
+
+
 def register_configs() -> None:
     OmegaConf.register_new_resolver("run_grid", run_grid, replace=True)
+    OmegaConf.register_new_resolver("join", join_path, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=Config)
     cs.store(group="world/rig", name="rig_schema", node=RigConfig, package="world.rig")
