@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, iou, mean, paired_interval
+from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, mean, paired_interval
+from offroad_path.evaluation.scores import iou
 
 A = [60, 20, 900, 20]  # tp fp tn fn of one block: IoU 60 / 100 = 0.6
 B = [90, 5, 900, 5]  # IoU 90 / 100 = 0.9

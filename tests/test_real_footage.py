@@ -26,7 +26,7 @@ def kitti_labels(compose_config, kitti_snippet, tmp_path_factory):
 
 def test_a_network_and_the_prior_on_the_real_snippet(kitti_labels, trained, tmp_path):
     checkpoint, _, _ = trained
-    frames = RealFrames.read(kitti_labels)
+    frames = RealFrames.read(kitti_labels, block_m=20.0, distance_m=20.0)
     n, h, w = frames.labels.shape
     assert n >= 5 and (h, w) == (370, 1226) and len(frames.images) == n  # the snippet's own frame size
     prior = np.zeros((288, 512), bool)

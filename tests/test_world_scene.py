@@ -55,7 +55,8 @@ def laptop_worlds(compose_config):
 def test_laptop_preset_yields_enough_labels(laptop_worlds):
     cfg, worlds = laptop_worlds
     label = cfg.label
-    count = sum(len(select_segments(w.poses[:, :3, 3], label.distance_m, label.strategy, label.stride_m)) for w in worlds)
+    settings = (label.distance_m, label.strategy, label.stride_m, label.min_motion_m)
+    count = sum(len(select_segments(w.poses[:, :3, 3], *settings)) for w in worlds)
     assert count >= 300
 
 

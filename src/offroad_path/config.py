@@ -297,21 +297,28 @@ class DataConfig:
 
 
 @dataclass
+class PaperTrainingConfig:
+    """How Holder & Breckon trained a network (conf/model/paper/<name>.yaml), which experiment=paper takes."""
+
+    lr: float = setting(positive())
+    lr_milestones: list[float] = setting(each(between(0, 1, low_open=True, high_open=True)))
+    steps: int = setting(at_least(1))  # SGD iterations of batch 6
+
+
+@dataclass
 class ModelConfig:
     name: str = setting(one_of(_model_names))
     width: float = setting(positive())  # channel multiplier: 1 is the original network
     lr: float = setting(positive())
-    paper_lr: float = setting(positive())  # the paper's rate, which experiment=paper takes
     # The rate times lr_gamma at each milestone, a fraction of the run's SGD iterations (training.task.sgd_with_milestones)
     lr_milestones: list[float] = setting(each(between(0, 1, low_open=True, high_open=True)))
-    paper_lr_milestones: list[float] = setting(each(between(0, 1, low_open=True, high_open=True)))  # experiment=paper's
     lr_gamma: float = setting(between(0, 1, low_open=True))
     lr_warmup: float = setting(between(0, 1, high_open=True))  # the rate ramps up from 0 over this fraction of the iterations
     momentum: float = setting(between(0, 1, high_open=True))
     weight_decay: float = setting(at_least(0))
     imagenet_weights: str = MISSING  # torchvision VGG16(-BN) file that pretraining=imagenet reads for this network
-    paper_steps: int = setting(at_least(1))  # SGD iterations the paper trained it for (experiment=paper caps training there)
     channels_last: bool = MISSING  # the memory format train.channels_last takes by default (measured per network)
+    paper: PaperTrainingConfig | None = None  # absent for a network the paper did not train
 
 
 @dataclass

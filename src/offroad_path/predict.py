@@ -2,7 +2,7 @@
 
     python -m offroad_path.predict predict.checkpoint=data/runs/unet-none/seed0/checkpoints/best.ckpt predict.input=drive.mp4
     python -m offroad_path.predict predict.run_id=<MLflow training run> predict.input=data/synthetic/seq_001 predict.postprocess=true
-    python -m offroad_path.predict predict.checkpoint=data/runs/segnet-none/seed0/model.onnx predict.input=images/
+    python -m offroad_path.predict predict.checkpoint=exports/segnet-none.onnx predict.input=images/
     python -m offroad_path.predict predict.checkpoint=... predict.input=drive.bag ingest.footprint.camera_height_m=1.2 \
         ingest.footprint.camera_pitch_deg=5 [ingest.topics.left=... ingest.topics.right=...]
 

@@ -15,46 +15,21 @@ of its blocks': `block_sums` once, then any number of resamples at little cost.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.evaluation.scores import Score, ratio
+
 RESAMPLES = 1000
 LEVEL = 0.95
 
-# A score of summed statistics (..., k) -> (...): vectorised over resamples.
-Score = Callable[[np.ndarray], np.ndarray]
-
-
-def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(b > 0, a / np.where(b > 0, b, 1), np.nan)
-
-
-# Scores of pooled confusion counts (..., 4) in the order tp, fp, tn, fn (evaluation.metrics.counts).
-def iou(c: np.ndarray) -> np.ndarray:
-    return _ratio(c[..., 0], c[..., 0] + c[..., 1] + c[..., 3])
-
-
-def precision(c: np.ndarray) -> np.ndarray:
-    return _ratio(c[..., 0], c[..., 0] + c[..., 1])
-
-
-def recall(c: np.ndarray) -> np.ndarray:
-    return _ratio(c[..., 0], c[..., 0] + c[..., 3])
-
-
-def accuracy(c: np.ndarray) -> np.ndarray:
-    return _ratio(c[..., 0] + c[..., 2], c.sum(axis=-1))
-
 
 def mean(s: np.ndarray) -> np.ndarray:
-    """The mean of a per-item value, from statistics (..., 2) = (sum of values, count)."""
-    return _ratio(s[..., 0], s[..., 1])
-
-
-SCORES: dict[str, Score] = {"iou": iou, "precision": precision, "recall": recall, "accuracy": accuracy}
+    """The mean of a per-item value, from statistics (..., 2) = (sum of values, count): a mean error
+    resampled like a pooled score (the confusion scores themselves are evaluation.scores')."""
+    return ratio(s[..., 0], s[..., 1])
 
 
 @dataclass(frozen=True)

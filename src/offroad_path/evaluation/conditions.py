@@ -14,8 +14,8 @@ import numpy as np
 
 from offroad_path.data.manifest import Sample, parse_boolean
 from offroad_path.evaluation.bootstrap import Interval
-from offroad_path.evaluation.bootstrap import iou as iou_score
 from offroad_path.evaluation.metrics import pooled
+from offroad_path.evaluation.scores import iou as iou_score
 from offroad_path.evaluation.tables import fmt
 from offroad_path.world.groups import GROUPS
 

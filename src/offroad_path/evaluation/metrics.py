@@ -7,20 +7,12 @@ differ when images have paths of very different sizes.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 from torchmetrics.functional.classification import binary_stat_scores
 from torchmetrics.functional.classification.precision_recall_curve import _adjust_threshold_arg, _binary_precision_recall_curve_compute
 
-
-@dataclass(frozen=True)
-class Scores:
-    accuracy: float
-    recall: float
-    precision: float
-    iou: float
+from offroad_path.evaluation.scores import SCORES, Scores, iou_per_image
 
 
 def counts(confidence: np.ndarray, target: np.ndarray, threshold: float = 0.5) -> np.ndarray:
@@ -50,25 +42,14 @@ def binary_truth(target: np.ndarray) -> torch.Tensor:
     return truth
 
 
-def scores(tp: float, fp: float, tn: float, fn: float) -> Scores:
-    """The paper's four scores from (pooled) counts; a score whose denominator is 0 is nan."""
-
-    def ratio(a: float, b: float) -> float:
-        return float(a / b) if b else float("nan")
-
-    return Scores(ratio(tp + tn, tp + fp + tn + fn), ratio(tp, tp + fn), ratio(tp, tp + fp), ratio(tp, tp + fp + fn))
-
-
 def pooled(per_image: np.ndarray) -> Scores:
     """Scores of the counts summed over all images (the paper's convention)."""
-    return scores(*per_image.sum(axis=0).tolist())
+    return Scores.of(per_image.sum(axis=0))
 
 
 def per_image_iou(per_image: np.ndarray) -> np.ndarray:
     """IoU of each image (N,); an image with no path in either prediction or truth scores 1."""
-    tp, fp, _, fn = per_image.T.astype(np.float64)
-    union = tp + fp + fn
-    return np.where(union > 0, tp / np.maximum(union, 1), 1.0)
+    return iou_per_image(per_image.astype(np.float64))
 
 
 def precision_recall_curve(confidence: np.ndarray, target: np.ndarray, thresholds: int = 101, batch: int = 16) -> dict[str, np.ndarray]:
@@ -121,23 +102,16 @@ def non_corresponding(predicted: np.ndarray, target: np.ndarray, groups: list) -
     fp = P.sum(1, keepdim=True) - tp
     fn = T.sum(1)[None, :] - tp
     tn = P.shape[1] - tp - fp - fn
+    pair_counts = torch.stack([tp, fp, tn, fn], dim=-1)  # (N, N, 4)
     codes = {g: i for i, g in enumerate(dict.fromkeys(groups))}
     g = torch.tensor([codes[x] for x in groups])
     pairs = g[:, None] != g[None, :]  # (N, N)
     if n < 2 or not pairs.any():
         raise ValueError("the non-corresponding baseline needs images of at least two different frames")
-    union = tp + fp + fn
-
-    def mean(x: torch.Tensor) -> float:
-        return float(torch.nanmean(x[pairs]))  # nan: a pair whose score is undefined (no path in it)
-
-    iou = torch.where(union > 0, tp / union.clamp(min=1), torch.ones_like(tp))
-    return Scores(
-        accuracy=mean((tp + tn) / P.shape[1]),
-        recall=mean(torch.where(tp + fn > 0, tp / (tp + fn).clamp(min=1), torch.full_like(tp, float("nan")))),
-        precision=mean(torch.where(tp + fp > 0, tp / (tp + fp).clamp(min=1), torch.full_like(tp, float("nan")))),
-        iou=mean(iou),
-    )
+    # Each pair is one image scored against one truth: IoU by the per-image convention, and the
+    # mean over pairs skips a pair whose score is undefined (nan: no path in it).
+    per_pair = {name: score(pair_counts) for name, score in SCORES.items()} | {"iou": iou_per_image(pair_counts)}
+    return Scores(**{name: float(torch.nanmean(value[pairs])) for name, value in per_pair.items()})
 
 
 def mean_path(labels: np.ndarray) -> np.ndarray:

@@ -26,8 +26,9 @@ import torch
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.loading import read
 from offroad_path.data.splitting import block_of
-from offroad_path.evaluation.bootstrap import Resampling, block_sums, interval, iou, mean
+from offroad_path.evaluation.bootstrap import Resampling, block_sums, interval, mean
 from offroad_path.evaluation.metrics import counts, non_corresponding, pooled
+from offroad_path.evaluation.scores import iou
 from offroad_path.evaluation.tables import method_title
 
 log = logging.getLogger(__name__)
@@ -58,8 +59,9 @@ class RealFrames:
     direction: list[int] = field(default_factory=list)  # -1 left, 0 straight, 1 right over the label's drive
 
     @classmethod
-    def read(cls, labels_dir: Path, block_m: float = 20.0, distance_m: float = 20.0) -> RealFrames:
-        """block_m: the blocks the bootstrap resamples; distance_m: how far ahead the direction is read."""
+    def read(cls, labels_dir: Path, block_m: float, distance_m: float) -> RealFrames:
+        """block_m: the blocks the bootstrap resamples (split.block_m); distance_m: how far ahead the
+        direction is read (label.distance_m)."""
         images, labels, groups, blocks, direction = [], [], [], [], []
         for run in read_label_run(labels_dir):
             travelled = run.distance()

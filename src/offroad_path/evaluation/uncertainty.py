@@ -17,9 +17,10 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
-from offroad_path.evaluation.bootstrap import SCORES, Interval, Resampling, Score, block_sums, interval, iou, paired_interval
+from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, paired_interval
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
+from offroad_path.evaluation.scores import SCORES, Score, iou
 from offroad_path.evaluation.tables import method_title, split_run_name
 
 

@@ -16,11 +16,12 @@ STRATEGIES = ("midway", "stride")
 
 def select_segments(
     positions: np.ndarray,
-    distance_m: float = 20.0,
-    strategy: str = "midway",
-    stride_m: float = 5.0,
-    min_motion_m: float = 0.01,
+    distance_m: float,
+    strategy: str,
+    stride_m: float,
+    min_motion_m: float,
 ) -> list[tuple[int, int]]:
+    # No defaults: the values are conf/label's (distance_m, strategy, stride_m, min_motion_m).
     """(f0, fn) pairs for camera centres `positions` (N, 3); fn is the first frame beyond distance_m."""
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown frame selection strategy {strategy!r}; valid: {', '.join(STRATEGIES)}")

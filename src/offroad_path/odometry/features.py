@@ -17,6 +17,7 @@ class FrontEnd:
         self.cfg = cfg
         self.fx, self.fy = calibration.K[0, 0], calibration.K[1, 1]
         self.cx, self.cy = calibration.K[0, 2], calibration.K[1, 2]
+        self.K = np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])  # the left camera's, for PnP
         self.baseline = calibration.baseline_m
         # The rig's rectification residuals, when an estimator knows them: observed minus true
         # disparity, and right-image rows below the left's. They move the right camera's principal
@@ -24,11 +25,6 @@ class FrontEnd:
         self.disparity_offset, self.row_offset = 0.0, 0.0
         criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
         self.lk = {"winSize": (cfg.lk_window, cfg.lk_window), "maxLevel": cfg.lk_levels, "criteria": criteria}
-
-    @property
-    def K(self) -> np.ndarray:
-        """The left camera's intrinsic matrix."""
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     def corners(self, image: np.ndarray, max_features: int, quality: float, taken: np.ndarray | None = None) -> np.ndarray:
         """The strongest corners of each image bucket, so that features cover the whole view.

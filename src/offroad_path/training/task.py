@@ -9,17 +9,30 @@ import lightning as L
 import torch
 import torch.nn.functional as F
 from omegaconf import DictConfig
-from torchmetrics import MetricCollection
-from torchmetrics.classification import (
-    BinaryAccuracy,
-    BinaryJaccardIndex,
-    BinaryPrecision,
-    BinaryRecall,
-    MulticlassAccuracy,
-    MulticlassJaccardIndex,
-)
+from torchmetrics import Metric, MetricCollection
+from torchmetrics.classification import MulticlassAccuracy, MulticlassJaccardIndex
+from torchmetrics.functional.classification import binary_stat_scores
 
+from offroad_path.evaluation.scores import SCORES
 from offroad_path.models import build_model
+
+
+class PathScore(Metric):
+    """One of the paper's scores (evaluation.scores) of the path class, from tp, fp, tn, fn summed
+    over an epoch and synced across DDP ranks: training logs what the evaluation reports."""
+
+    full_state_update = False
+
+    def __init__(self, score: str):
+        super().__init__()
+        self.score = SCORES[score]
+        self.add_state("counts", default=torch.zeros(4, dtype=torch.long), dist_reduce_fx="sum")
+
+    def update(self, predicted: torch.Tensor, target: torch.Tensor) -> None:  # (N, H, W) 0/1 each
+        self.counts += binary_stat_scores(predicted, target, validate_args=False)[:4]
+
+    def compute(self) -> torch.Tensor:
+        return self.score(self.counts)
 
 
 class BaseTask(L.LightningModule):
@@ -112,10 +125,8 @@ class SegmentationTask(BaseTask):
 
     def configure_metrics(self) -> None:
         n = self.hparams.num_classes
-        if n == 2:  # path or not: the paper's accuracy, precision, recall and IoU of the path class
-            metrics = MetricCollection(
-                {"accuracy": BinaryAccuracy(), "precision": BinaryPrecision(), "recall": BinaryRecall(), "iou": BinaryJaccardIndex()}
-            )
+        if n == 2:  # path or not: the paper's scores of the path class (MetricCollection shares their counts)
+            metrics = MetricCollection({name: PathScore(name) for name in SCORES})
         else:
             metrics = MetricCollection(
                 {"accuracy": MulticlassAccuracy(n, average="micro"), "iou": MulticlassJaccardIndex(n, average="macro")}

@@ -1,0 +1,75 @@
+"""The paper's four scores (Holder & Breckon 2018, section V), defined once for every place that
+scores a path: the results table, the baselines, the block-bootstrap intervals, the conditions,
+the real-footage rows and training's logged metrics.
+
+A score is a function of confusion counts (..., 4) in the order tp, fp, tn, fn, vectorised over
+the leading axes (a bootstrap's resamples, a matrix of image pairs), for NumPy arrays and torch
+tensors alike; a score whose denominator is 0 is nan. Adding a score: its function and its name
+in SCORES here, and a field in `Scores`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
+import torch
+
+TP, FP, TN, FN = range(4)  # the columns of a count array (evaluation.metrics.counts)
+
+Array = TypeVar("Array", np.ndarray, torch.Tensor)
+
+
+def ratio(a: Array, b: Array) -> Array:
+    """a / b, nan where b is 0. Integer torch counts divide in float32, as torchmetrics does."""
+    if isinstance(a, torch.Tensor):
+        return torch.where(b > 0, a / torch.where(b > 0, b, 1), torch.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(b > 0, a / np.where(b > 0, b, 1), np.nan)
+
+
+def accuracy(c: Array) -> Array:
+    return ratio(c[..., TP] + c[..., TN], c.sum(-1))
+
+
+def recall(c: Array) -> Array:
+    return ratio(c[..., TP], c[..., TP] + c[..., FN])
+
+
+def precision(c: Array) -> Array:
+    return ratio(c[..., TP], c[..., TP] + c[..., FP])
+
+
+def iou(c: Array) -> Array:
+    return ratio(c[..., TP], c[..., TP] + c[..., FP] + c[..., FN])
+
+
+def iou_per_image(c: Array) -> Array:
+    """IoU of single images: one with no path in either prediction or truth scores 1 (not nan),
+    so that a per-image mean counts a correctly empty image as right."""
+    union = c[..., TP] + c[..., FP] + c[..., FN]
+    one = torch.ones_like(union, dtype=torch.float64) if isinstance(c, torch.Tensor) else 1.0
+    return torch.where(union > 0, iou(c), one) if isinstance(c, torch.Tensor) else np.where(union > 0, iou(c), one)
+
+
+Score = Callable[[np.ndarray], np.ndarray]
+# In the order training has always logged them (metrics.json keys).
+SCORES: dict[str, Score] = {"accuracy": accuracy, "precision": precision, "recall": recall, "iou": iou}
+
+
+@dataclass(frozen=True)
+class Scores:
+    """The four scores of one set of pooled counts, in the paper's column order."""
+
+    accuracy: float
+    recall: float
+    precision: float
+    iou: float
+
+    @classmethod
+    def of(cls, pooled_counts: np.ndarray) -> Scores:
+        """From counts (4,) summed over a test set (the paper pools before scoring)."""
+        c = np.asarray(pooled_counts)
+        return cls(**{name: float(score(c)) for name, score in SCORES.items()})
