@@ -26,6 +26,14 @@ def test_the_grid_lists_every_registered_network_and_each_has_a_config():
     assert configs == {name: name for name in MODELS}, "each registered network has conf/model/<name>.yaml, and no other"
 
 
+def test_each_pretraining_the_code_implements_has_a_config_and_no_other():
+    """Validation reads the choices from conf/pretraining/ (without importing torch); the code implements them."""
+    from offroad_path.config import PRETRAININGS
+    from offroad_path.training.pretrained import CHOICES
+
+    assert sorted(PRETRAININGS()) == sorted(CHOICES)
+
+
 class TinyNet(SegmentationNet):
     """A stand-in fourth network: one convolution (what a new module under models/ would hold)."""
 

@@ -1,57 +1,18 @@
 """Every stage of dvc.yaml depends on all the code it runs: each module its entry point imports,
-directly or not (imports inside functions included), lies under one of the stage's deps. A
-missing dep means `dvc repro` keeps a stale output after a code change."""
+directly or not (imports inside functions included), lies under one of the stage's deps, and the
+deps are what offroad_path.utils.dvc_deps generates. A missing dep means `dvc repro` keeps a stale
+output after a code change."""
 
 from __future__ import annotations
-
-import ast
-from pathlib import Path
 
 import pytest
 import yaml
 from helpers import ROOT
 
-PACKAGE = ROOT / "src" / "offroad_path"
-STAGES = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+from offroad_path.utils.dvc_deps import code_deps, has_code, imported_files, main, rewrite
 
-
-def module_file(name: str) -> Path | None:
-    path = ROOT / "src" / Path(*name.split("."))
-    for candidate in (path.with_suffix(".py"), path / "__init__.py"):
-        if candidate.is_file():
-            return candidate
-    return None
-
-
-def has_code(file: Path) -> bool:
-    """False for a module that holds only its docstring (and `from __future__` imports)."""
-    body = ast.parse(file.read_text()).body
-    return any(
-        not (isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant))
-        and not (isinstance(n, ast.ImportFrom) and n.module == "__future__")
-        for n in body
-    )
-
-
-def imported_files(entry: str) -> set[Path]:
-    """The package's files that running `python -m <entry>` can import."""
-    seen: set[Path] = set()
-    todo = [entry]
-    while todo:
-        name = todo.pop()
-        # Importing a.b.c runs a/__init__.py and a/b/__init__.py first.
-        parts = name.split(".")
-        for i in range(1, len(parts) + 1):
-            file = module_file(".".join(parts[:i]))
-            if file is None or file in seen:
-                continue
-            seen.add(file)
-            for node in ast.walk(ast.parse(file.read_text())):
-                if isinstance(node, ast.Import):
-                    todo += [a.name for a in node.names if a.name.startswith("offroad_path")]
-                elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("offroad_path"):
-                    todo += [node.module] + [f"{node.module}.{a.name}" for a in node.names]
-    return seen
+DVC_YAML = yaml.safe_load((ROOT / "dvc.yaml").read_text())
+STAGES = DVC_YAML["stages"]
 
 
 @pytest.mark.parametrize("stage", sorted(STAGES))
@@ -62,3 +23,28 @@ def test_the_stage_depends_on_every_module_it_imports(stage):
     ran = {f for f in imported_files(entry) if has_code(f)}
     missing = sorted(str(f.relative_to(ROOT)) for f in ran if not any(f == d or d in f.parents for d in deps))
     assert not missing, f"dvc.yaml stage {stage} runs these files but does not list them in its deps: {missing}"
+
+
+def test_dvc_yaml_holds_the_generated_code_deps():
+    assert main(["--check"]) == 0, "run: python -m offroad_path.utils.dvc_deps"
+
+
+def test_the_generator_lists_a_new_import_and_drops_a_removed_one(tmp_path):
+    text = (ROOT / "dvc.yaml").read_text()
+    split = STAGES["split"]
+    stale = text.replace(f"      - {code_deps('offroad_path.split')[-1]}\n", "      - src/offroad_path/viz\n", 1)
+    assert stale != text
+    (tmp_path / "dvc.yaml").write_text(stale)
+    assert main(["--check", "--dvc-yaml", str(tmp_path / "dvc.yaml")]) == 1
+    assert main(["--dvc-yaml", str(tmp_path / "dvc.yaml")]) == 0
+    assert (tmp_path / "dvc.yaml").read_text() == rewrite(text) == text
+    assert split["deps"][0] == "data/labels"  # data deps stay first, as written
+
+
+def test_every_pretraining_of_the_grid_has_a_training_stage():
+    """postprocess and evaluate iterate `pretrainings` (conf/evaluate): each needs a train stage
+    that writes its runs, or postprocess would have stages with no producer."""
+    grid = yaml.safe_load((ROOT / "conf" / "evaluate" / "default.yaml").read_text())
+    trained = {cmd.split("pretraining=")[1].split()[0] for cmd in (s["cmd"] for s in STAGES.values()) if "offroad_path.train " in cmd}
+    missing = sorted(set(grid["pretrainings"]) - trained)
+    assert not missing, f"pretrainings {missing} of conf/evaluate/default.yaml have no train stage in dvc.yaml"

@@ -29,10 +29,14 @@ MAX_STEPS = rule(lambda v: v == -1 or v >= 1, "must be -1 (no cap) or an integer
 THREADS = {"rule": Rule(is_thread_setting, "must be all, free or a whole number >= 1")}  # offroad_path.utils.threads
 
 
-def _model_names() -> list[str]:
-    """The networks with a config file (conf/model/<name>.yaml); tests check these against the
-    registry, offroad_path.models.MODELS, which config validation need not import."""
-    return [p.stem for p in (CONF_DIR / "model").glob("*.yaml")]
+def config_names(group: str) -> Callable[[], list[str]]:
+    """The choices of a config group that has one file per implemented choice (conf/<group>/<name>.yaml):
+    tests check them against the registry that implements them (offroad_path.models.MODELS,
+    offroad_path.training.pretrained.CHOICES), which validating a value then need not import (torch)."""
+    return lambda: sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
+
+
+_model_names = config_names("model")
 
 
 def registry(module: str, name: str) -> Callable[[], list[str]]:
@@ -41,7 +45,7 @@ def registry(module: str, name: str) -> Callable[[], list[str]]:
     return lambda: list(getattr(importlib.import_module(f"offroad_path.{module}"), name))
 
 
-PRETRAININGS = registry("training.pretrained", "CHOICES")
+PRETRAININGS = config_names("pretraining")
 
 
 @dataclass

@@ -17,9 +17,6 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from offroad_path.driving.loop import DriveLog
-from offroad_path.driving.report import ARGUMENTS, report
-from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, WorldJob, checkpoint_of, drive_params, drive_world, test_worlds
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
 from offroad_path.utils.outputs import Outputs
@@ -37,6 +34,9 @@ def outputs(cfg: DictConfig) -> Outputs:
 
 def check_policies(d: DictConfig, seed: int) -> None:
     """Every argument is known and every policy's checkpoint exists, before any world is built."""
+    from offroad_path.driving.report import ARGUMENTS
+    from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, checkpoint_of
+
     if unknown := sorted(set(d.arguments) - set(ARGUMENTS)):
         raise ValueError(f"drive.arguments: unknown argument {unknown[0]!r} (arguments: {', '.join(ARGUMENTS)})")
     for argument, names in d.arguments.items():
@@ -53,6 +53,11 @@ def check_policies(d: DictConfig, seed: int) -> None:
 
 @reads("drive", "world", "postprocess", "label", "mlflow", writes=outputs)
 def run_drive(cfg: DictConfig) -> dict:
+    # The networks and the renderer (torch among them) once the config and outputs are checked.
+    from offroad_path.driving.loop import DriveLog
+    from offroad_path.driving.report import ARGUMENTS, report
+    from offroad_path.driving.worlds import WorldJob, drive_params, drive_world, test_worlds
+
     d = cfg.drive
     check_policies(d, cfg.seed)
     worlds = test_worlds(Path(d.synthetic_dir), d.worlds)
@@ -85,6 +90,8 @@ def log_to_mlflow(cfg: DictConfig, metrics: dict) -> None:
         if run is None:
             return
         import mlflow
+
+        from offroad_path.driving.report import ARGUMENTS
 
         numbers = {k: v for k, v in flatten({a: m for a, m in metrics.items() if a in ARGUMENTS}).items() if isinstance(v, int | float)}
         mlflow.log_metrics({k.replace("+", "_"): v for k, v in numbers.items() if v == v})  # NaN is not a metric

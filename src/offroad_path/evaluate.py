@@ -13,21 +13,41 @@ from __future__ import annotations
 
 import logging
 from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from omegaconf import DictConfig
 
-from offroad_path.evaluation.report import Section, TestSet, outputs, report_metrics, write_report
-from offroad_path.evaluation.sections import Baselines, ByCondition, RealFootage, ResultsTable, SteeringFromPaths, Temporal
+from offroad_path.data.labels import label_run_folders
+from offroad_path.data.manifest import manifest_folders
 from offroad_path.evaluation.tables import ResultRow, split_run_name
-from offroad_path.evaluation.uncertainty import Uncertainty, test_bootstrap
 from offroad_path.stage import hydra_stage, reads
+from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.tracking import stage_run, tracking_uri
+
+if TYPE_CHECKING:
+    from offroad_path.evaluation.report import Section
 
 log = logging.getLogger("offroad_path.evaluate")
 
 
+def outputs(cfg: DictConfig) -> Outputs:
+    """The evaluate stage's outputs and every input: the runs, their post-processed maps, the label
+    runs, the split and the recordings behind it, PilotNet's predictions."""
+    e = cfg.evaluate
+    inputs = [e.runs_dir, e.postprocessed_dir, e.labels_dir, Path(e.train_manifest).parent, *manifest_folders(e.train_manifest),
+              e.steering_from_paths.pilotnet_predictions, *(label_run_folders(e.real_labels_dir) if e.real_labels_dir else [])]  # fmt: skip
+    folders = {"evaluate.out_dir": e.out_dir, "evaluate.plots_dir": e.plots_dir}
+    return Outputs("evaluate", folders=folders, files={"evaluate.metrics_path": e.metrics_path}, inputs=inputs)
+
+
 @reads("evaluate", "label", "split", "mlflow", writes=outputs)
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
+    # The work's modules (torch among them) once the config and outputs are checked: a refusal is fast.
+    from offroad_path.evaluation.report import TestSet, write_report
+    from offroad_path.evaluation.sections import Baselines, ByCondition, RealFootage, ResultsTable, SteeringFromPaths, Temporal
+    from offroad_path.evaluation.uncertainty import Uncertainty, test_bootstrap
+
     e = cfg.evaluate
     test = TestSet.read(e)
     results = ResultsTable()
@@ -77,6 +97,8 @@ def log_to_mlflow(cfg: DictConfig, sections: list[Section], table: list[ResultRo
         if run is None:
             return
         import mlflow
+
+        from offroad_path.evaluation.report import report_metrics
 
         mlflow.log_metrics(flat(report_metrics(sections)))  # <run>.raw.iou, baselines.mean_path_prior.iou, ...
         linked = training_runs(cfg)

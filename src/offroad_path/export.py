@@ -16,8 +16,6 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from offroad_path.inference.export import export_onnx
-from offroad_path.inference.runners import TorchModel
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import UnsafeOutputError, sidecar, write_text_atomic
 from offroad_path.utils.outputs import Outputs
@@ -31,6 +29,9 @@ def outputs(cfg: DictConfig) -> Outputs:
 
 @reads("export", writes=outputs)
 def run_export(cfg: DictConfig) -> float:
+    from offroad_path.inference.export import export_onnx  # torch: after the config is checked
+    from offroad_path.inference.runners import TorchModel
+
     e = cfg.export
     out = Path(e.out)
     if out.suffix != ".onnx":

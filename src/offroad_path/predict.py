@@ -28,7 +28,6 @@ from omegaconf import DictConfig
 from tqdm import tqdm
 
 from offroad_path.inference.ros_out import PredictionBag
-from offroad_path.inference.runners import load_model
 from offroad_path.inference.sources import FrameSource, is_bag, open_source
 from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.stage import hydra_stage, reads
@@ -77,6 +76,8 @@ def check_ground(cfg: DictConfig) -> None:
 
 @reads("predict", "postprocess", "label", "ingest", "mlflow", writes=outputs)
 def run_predict(cfg: DictConfig) -> dict:
+    from offroad_path.inference.runners import load_model  # torch: after the config is checked
+
     p, pp = cfg.predict, cfg.postprocess
     check_ground(cfg)
     threads = set_threads(p.threads)  # "free" by default: a busy machine gets fewer threads, not a collapse

@@ -13,7 +13,7 @@ import logging
 from omegaconf import DictConfig
 
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.training.run import fit_segmentation, segmentation_outputs
+from offroad_path.training.outputs import segmentation_outputs
 from offroad_path.world.classes import CLASS_NAMES
 
 log = logging.getLogger("offroad_path.pretrain")
@@ -21,6 +21,8 @@ log = logging.getLogger("offroad_path.pretrain")
 
 @reads("pretrain", "data", "model", "trainer", "callbacks", "logger", "mlflow", writes=segmentation_outputs("pretrain"))
 def pretrain(cfg: DictConfig) -> dict:
+    from offroad_path.training.run import fit_segmentation  # torch and Lightning: after the config is checked
+
     metrics = fit_segmentation(cfg, "pretrain", target="semantic")
     log.info("pretrained %s on %d classes: best validation mIoU %s", cfg.model.name, len(CLASS_NAMES), metrics["best_val_iou"])
     return metrics

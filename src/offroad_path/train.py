@@ -17,13 +17,15 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.training.run import fit_segmentation, segmentation_outputs, write_confidence_maps
+from offroad_path.training.outputs import segmentation_outputs
 
 log = logging.getLogger("offroad_path.train")
 
 
 @reads("train", "data", "model", "pretraining", "trainer", "callbacks", "logger", "mlflow", writes=segmentation_outputs("train"))
 def train(cfg: DictConfig) -> dict:
+    from offroad_path.training.run import fit_segmentation, write_confidence_maps  # torch and Lightning: after the config is checked
+
     out_dir = Path(cfg.train.out_dir)
 
     def predictions(task, data, tmp: Path) -> dict:

@@ -14,14 +14,12 @@ from typing import Protocol
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.data.labels import label_run_folders
 from offroad_path.data.loading import load_labels, load_maps
-from offroad_path.data.manifest import Sample, manifest_folders, read_manifest, read_predictions_manifest
+from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
 from offroad_path.evaluation.figures import save_png
 from offroad_path.evaluation.metrics import counts, mean_path, precision_recall_curve
 from offroad_path.evaluation.tables import csv_text
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
-from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger(__name__)
 POSTPROCESSING = ("no", "yes")
@@ -97,16 +95,6 @@ class Section(Protocol):
 
 def report_metrics(sections: list[Section]) -> dict:
     return {key: value for section in sections for key, value in section.metrics().items()}
-
-
-def outputs(cfg: DictConfig) -> Outputs:
-    """The evaluate stage's outputs and every input: the runs, their post-processed maps, the label
-    runs, the split and the recordings behind it, PilotNet's predictions."""
-    e = cfg.evaluate
-    inputs = [e.runs_dir, e.postprocessed_dir, e.labels_dir, Path(e.train_manifest).parent, *manifest_folders(e.train_manifest),
-              e.steering_from_paths.pilotnet_predictions, *(label_run_folders(e.real_labels_dir) if e.real_labels_dir else [])]  # fmt: skip
-    folders = {"evaluate.out_dir": e.out_dir, "evaluate.plots_dir": e.plots_dir}
-    return Outputs("evaluate", folders=folders, files={"evaluate.metrics_path": e.metrics_path}, inputs=inputs)
 
 
 def write_report(e: DictConfig, test: TestSet, sections: list[Section], table: list, figures: dict[str, np.ndarray]) -> None:

@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 from offroad_path.data.datamodule import OffroadDataModule
 from offroad_path.data.dataset import transforms
 from offroad_path.data.loading import load_sample
-from offroad_path.data.manifest import manifest_folders, prediction_name, write_predictions_manifest
+from offroad_path.data.manifest import prediction_name, write_predictions_manifest
 from offroad_path.training.callbacks import LogSamples, SeedEachEpoch, StampConfig, StayStopped, configured_callbacks
 from offroad_path.training.checkpoints import (
     CONFIG_HASH,
@@ -40,7 +40,6 @@ from offroad_path.training.checkpoints import (
 from offroad_path.training.pretrained import initialise
 from offroad_path.training.task import BaseTask, SegmentationTask
 from offroad_path.utils.atomic import MARKER, atomic_directory, owned
-from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
 from offroad_path.world.classes import CLASS_NAMES
@@ -201,20 +200,6 @@ def fit(
         logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
         logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
     return metrics
-
-
-def segmentation_outputs(stage: str) -> Callable[[DictConfig], Outputs]:
-    """The outputs rule of the pretrain and train stages: `<stage>.out_dir`, against the split, the
-    label runs and recordings its manifests point into, and the pretraining's checkpoint or weights."""
-
-    def outputs(cfg: DictConfig) -> Outputs:
-        split_dir = Path(cfg.data.split_dir)
-        inputs = [split_dir, *(f for part in ("train", "val", "test") for f in manifest_folders(split_dir / f"{part}.csv"))]
-        if "pretraining" in cfg:
-            inputs += [cfg.pretraining.checkpoint, cfg.pretraining.weights_path]
-        return Outputs(stage, folders={f"{stage}.out_dir": cfg[stage].out_dir}, inputs=inputs)
-
-    return outputs
 
 
 def fit_segmentation(

@@ -1,0 +1,107 @@
+"""The train_steering stage's work: PilotNet fitted with the shared training loop
+(training.run.fit), its test predictions, metrics and plots."""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import torch
+from lightning.pytorch.loggers import MLFlowLogger
+from omegaconf import DictConfig, OmegaConf
+
+from offroad_path.data.labels import read_label_run
+from offroad_path.steering.dataset import SteeringDataModule
+from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
+from offroad_path.steering.frames import PARTS, steering_split
+from offroad_path.steering.task import SteeringTask
+from offroad_path.training.run import RunSpec, fit, run_identity, training_logger
+from offroad_path.utils.atomic import write_text_atomic
+
+log = logging.getLogger("offroad_path.train_steering")
+
+
+def predict(task: SteeringTask, loader) -> tuple[np.ndarray, np.ndarray]:
+    task.eval()
+    true, predicted = [], []
+    with torch.no_grad():
+        for batch in loader:
+            predicted.append(task(batch["image"].to(task.device)).cpu())
+            true.append(batch["steering"])
+    return torch.cat(true).numpy(), torch.cat(predicted).numpy()
+
+
+def slippery_steering(cfg: DictConfig) -> dict[str, np.ndarray]:
+    """Each labelled synthetic sequence's steering had it been driven on world.slip's ground: the
+    driver's input that made the same motion (offroad_path.world.record.steering_under_slip)."""
+    from offroad_path.world.record import steering_under_slip  # the world and its renderer, only for this
+
+    runs = read_label_run(Path(cfg.steering.labels_dir))
+    folders = [run.sequence.root for run in runs if run.sequence.meta.get("generator") == "offroad_path.world"]
+    if not folders:
+        raise ValueError(f"steering.slip: {cfg.steering.labels_dir} labels no rendered sequence, whose world could be driven with slip")
+    log.info("steering under slip (world.slip) for %d rendered sequences", len(folders))
+    return steering_under_slip(cfg.world, folders)
+
+
+def fit_steering(cfg: DictConfig) -> dict:
+    """The train_steering stage's run (offroad_path.train_steering): PilotNet on the path split's
+    training frames, tested, written to steering.out_dir, steering.metrics_path and steering.plots_path."""
+    s = cfg.steering
+    L.seed_everything(cfg.seed, workers=True)
+    # The frames follow the path split's blocks of driving, with its guard (conf/split).
+    angles = slippery_steering(cfg) if s.slip else None
+    parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror, steering=angles)
+    data = SteeringDataModule(parts, s, cfg.seed)
+    task = SteeringTask.from_config(s)
+    outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")
+    settings = {"block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,
+                "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs}}  # fmt: skip
+    if s.slip:
+        settings["slip"] = OmegaConf.to_container(cfg.world.slip)
+    files = [Path(s.split_dir) / f"{part}.csv" for part in PARTS] + [Path(s.labels_dir) / "summary.json"]
+    scored: dict[str, np.ndarray] = {}
+
+    def write_predictions(task: SteeringTask, data: SteeringDataModule, tmp: Path) -> dict:
+        true, predicted = predict(task, data.test_dataloader())
+        scored.update(true=true, predicted=predicted)
+        bins = error_by_magnitude(true, predicted)
+        with open(tmp / "predictions.csv", "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(["sequence", "frame", "mirrored", "true", "predicted"])
+            for frame, a, b in zip(parts["test"], true, predicted, strict=True):
+                writer.writerow([frame.sequence, frame.frame, frame.mirrored, f"{a:.6f}", f"{b:.6f}"])
+        with open(tmp / "error_by_magnitude.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(bins[0]))
+            writer.writeheader()
+            writer.writerows(bins)
+        scatter_plot(true, predicted, tmp / "scatter.png")
+        return {**steering_metrics(true, predicted, s.lock_deg, s.steering_ratio), "by_true_magnitude": bins}
+
+    spec = RunSpec(stage="train_steering", out_dir=Path(s.out_dir), out_key="steering.out_dir",
+                   key=run_identity(cfg, "train_steering", settings, files), max_epochs=s.max_epochs, patience=s.patience,
+                   write_more=write_predictions)  # fmt: skip
+    tags = {"stage": "train_steering", "model": "pilotnet", "slip": str(s.slip).lower()}
+    logger = training_logger(cfg, "train_steering pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
+    results = fit(cfg, task, data, spec, logger)
+    metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
+    true, predicted = scored["true"], scored["predicted"]
+    write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n", "train_steering")
+    pairs = "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True))
+    write_text_atomic(s.plots_path, "truth,prediction\n" + pairs, "train_steering")
+    if logger is not None:
+        logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
+    if isinstance(logger, MLFlowLogger):
+        for name in ("scatter.png", "error_by_magnitude.csv"):
+            logger.experiment.log_artifact(logger.run_id, str(Path(s.out_dir) / name))
+    log.info(
+        "PilotNet: test mean absolute error %.4f (%.1f degrees at the steering wheel; straight ahead would score %.4f), "
+        "largest predicted magnitude %.3f of true %.3f",
+        metrics["mean_absolute_error"], metrics["mean_absolute_error_steering_wheel_deg"], metrics["straight_ahead_mean_absolute_error"],
+        metrics["largest_predicted_magnitude"], metrics["largest_true_magnitude"],
+    )  # fmt: skip
+    return metrics
