@@ -32,7 +32,9 @@ class PathScore(Metric):
         self.counts += binary_stat_scores(predicted, target, validate_args=False)[:4]
 
     def compute(self) -> torch.Tensor:
-        return self.score(self.counts)
+        # An epoch that predicts no path has no precision (nan in the evaluation's tables); logged as
+        # 0, as torchmetrics does, so that early stopping and metrics.json see a number.
+        return torch.nan_to_num(self.score(self.counts), nan=0.0)
 
 
 class BaseTask(L.LightningModule):
