@@ -87,6 +87,7 @@ def rectified_row_error(rig) -> float:
 @pytest.mark.parametrize(
     "board,max_row_error_px", [(Board(10, 7, 0.04), 0.5), (Board(7, 5, 0.07, marker_m=0.05), 0.8)], ids=["chessboard", "charuco"]
 )
+@pytest.mark.slow(seconds=17)
 def test_calibrate_recovers_the_rig(board, max_row_error_px, tmp_path):
     render_views(board, tmp_path / "views")
     out = tmp_path / "stereo.yaml"

@@ -54,6 +54,7 @@ def own(compose_config, drive) -> OdometryRun:
     return odometry(compose_config, open_sequence(drive / "drive"))[1]
 
 
+@pytest.mark.slow(seconds=10)
 def test_the_odometry_finds_a_rigs_disparity_offset_and_keeps_its_scale(compose_config, drive, own):
     """Through a rig 0.3 px short of disparity the estimate moves by -0.3 px from the rendered rig's
     own (which is near 0); taken as zero, the same offset makes every depth long and the path with it

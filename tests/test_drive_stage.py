@@ -56,6 +56,7 @@ def driven(compose_config, inputs, tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow(seconds=15)
 def test_outputs_follow_the_contract(driven):
     drive_dir = driven / "drive"
     metrics = json.loads((driven / "drive.json").read_text())
@@ -84,6 +85,7 @@ def test_outputs_follow_the_contract(driven):
     assert logged > 20
 
 
+@pytest.mark.slow(seconds=7)
 def test_an_unknown_policy_is_refused_before_anything_is_written(inputs, tmp_path):
     cli = [
         sys.executable,

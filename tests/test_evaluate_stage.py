@@ -174,6 +174,7 @@ def test_steering_from_paths_against_pilotnet(scored, split_dir, tmp_path):
     assert "| PilotNet (end to end) |" in table and "| U-Net (none) + pure pursuit |" in table
 
 
+@pytest.mark.slow(seconds=9)
 def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path):
     cli = [sys.executable, "-m", "offroad_path.evaluate", f"split.out_dir={split_dir}", f"evaluate.runs_dir={tmp_path / 'runs'}",
            "evaluate.runs=[segnet-none]", f"evaluate.out_dir={tmp_path / 'evaluation'}", f"evaluate.metrics_path={tmp_path / 'm.json'}",

@@ -16,6 +16,7 @@ def test_test_world_seeds_are_never_training_seeds():
     assert not training & {held_out_seed(0, i) for i in range(1000)}
 
 
+@pytest.mark.slow(seconds=7)
 def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config):
     cfg = compose_config("synthesize.test_worlds.block_m=20", "synthesize.test_worlds.horizon_m=20")
     c, seed = cfg.synthesize.test_worlds, held_out_seed(0, 0)
@@ -29,6 +30,7 @@ def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config
     assert "all" in groups and len(groups) < len(GROUPS)  # one world does not show everything
 
 
+@pytest.mark.slow(seconds=36)
 def test_the_chosen_worlds_show_every_group_and_each_adds_one_lacking(compose_config):
     c = compose_config("synthesize.test_worlds.per_condition=1", "synthesize.test_worlds.min_blocks=1").synthesize.test_worlds
     cfg = compose_config().world

@@ -100,6 +100,7 @@ def test_predict_on_a_video_and_from_an_mlflow_run(compose_config, trained, fram
 
 
 @pytest.mark.parametrize("model", sorted(MODELS))
+@pytest.mark.slow(seconds=9)
 def test_onnx_export_agrees_with_pytorch(model, tmp_path):
     torch.manual_seed(0)
     difference = export_onnx(build_model(model, 2, 0.125), 128, 72, tmp_path / f"{model}.onnx")
@@ -127,6 +128,7 @@ def test_predict_runs_the_exported_model_like_the_checkpoint(compose_config, tra
     (lambda p: (p / "empty").mkdir() or p / "empty", "holds no images"),
     (lambda p: (p / "broken.mp4").write_text("not a video") and p / "broken.mp4", "not a readable video"),
 ])  # fmt: skip
+@pytest.mark.slow(seconds=14)
 def test_bad_input_gets_one_clear_line_and_no_output(trained, tmp_path, make, message):
     source = make(tmp_path)
     cli = [sys.executable, "-m", "offroad_path.predict", f"predict.checkpoint={trained[0]}", f"predict.input={source}",

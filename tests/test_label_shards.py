@@ -45,6 +45,7 @@ def shard_folders(three_drives, tmp_path_factory) -> Path:
     return out / "shards"
 
 
+@pytest.mark.slow(seconds=11)
 def test_shards_merge_into_what_one_run_writes(compose_config, three_drives, single_run, shard_folders, tmp_path):
     assert sorted(json.loads((shard_folders / str(i) / "shard.json").read_text())["sequences"] for i in (0, 1)) == [
         ["drive_0", "drive_2"], ["drive_1"]]  # fmt: skip

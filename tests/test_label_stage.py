@@ -100,6 +100,7 @@ def test_label_stage_writes_its_contract_and_tracks_it(compose_config, drive, tm
     assert params["distance_m"] == "20.0" and params["poses.source"] == "vo"
 
 
+@pytest.mark.slow(seconds=12)
 def test_vo_labels_agree_with_ground_truth_labels(compose_config, drive, tmp_path):
     label(label_config(compose_config, drive, tmp_path / "vo"))
     label(label_config(compose_config, drive, tmp_path / "gt_poses", "label.poses.source=file"))

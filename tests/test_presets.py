@@ -79,6 +79,7 @@ def full_size_on_cpu(tmp_path, split_dir) -> list[str]:
             f"train.out_dir={tmp_path / 'run'}"]  # fmt: skip
 
 
+@pytest.mark.slow(seconds=27)
 def test_paper_preset_trains_without_a_validation_set(compose_config, labelled_drive, tmp_path):
     split_dir = tmp_path / "split"
     split(compose_config("experiment=paper", f"split.labels_dir={labelled_drive}", f"split.out_dir={split_dir}"))

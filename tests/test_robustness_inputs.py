@@ -91,6 +91,7 @@ BAD_VALUES = [
 
 
 @pytest.mark.parametrize(("override", "named"), BAD_VALUES, ids=[o for o, _ in BAD_VALUES])
+@pytest.mark.slow(seconds=7)
 def test_bad_values_are_refused_before_any_work(compose_config, tmp_path, capsys, override, named):
     ran = []
     cfg = compose_config(override, f"label.out_dir={tmp_path / 'labels'}")

@@ -193,6 +193,7 @@ def test_calibrate_refuses_a_zero_square_and_an_out_in_a_missing_folder(tmp_path
     ],
     ids=["typo", "type", "choice", "reversed search range"],
 )
+@pytest.mark.slow(seconds=17)
 def test_hydra_and_search_errors_are_one_line_exit_2(tmp_path, overrides, says):
     stage = "train" if "-m" in overrides else "label"
     cli = [

@@ -21,6 +21,7 @@ SMALL = ("world.frames=8", "world.width=64", "world.height=36")
 NO_JITTER = ("world.slip.jitter=0", "world.slip.noise=0")
 
 
+@pytest.mark.slow(seconds=7)
 def test_a_factor_of_one_everywhere_renders_todays_world_byte_for_byte(compose_config, tmp_path):
     plain = compose_config(*SMALL).world
     slippery = compose_config().world.slip.factors
@@ -39,6 +40,7 @@ def test_a_factor_of_one_everywhere_renders_todays_world_byte_for_byte(compose_c
     assert {k: v for k, v in meta_ones.items() if k != "steering"} == {k: v for k, v in meta_plain.items() if k != "steering"}
 
 
+@pytest.mark.slow(seconds=6)
 def test_with_slip_the_recorded_steering_makes_the_true_motion_on_that_ground(compose_config):
     cfg = compose_config(*SMALL, "world.frames=60", "world.slip.enabled=true", *NO_JITTER).world
     slippery, plain = build_world(cfg, 7), build_world(compose_config(*SMALL, "world.frames=60").world, 7)
@@ -53,6 +55,7 @@ def test_with_slip_the_recorded_steering_makes_the_true_motion_on_that_ground(co
     assert np.all(np.abs(slippery.steering) >= np.abs(plain.steering))
 
 
+@pytest.mark.slow(seconds=8)
 def test_steering_under_slip_of_a_recorded_sequence_and_a_config_that_did_not_render_it(compose_config, tmp_path):
     cfg = compose_config(*SMALL).world
     record_sequence(cfg, seed=4, out_dir=tmp_path / "seq")

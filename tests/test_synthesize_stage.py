@@ -25,6 +25,7 @@ TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.he
 HELD_OUT = ("synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.per_condition=0", "synthesize.test_worlds.horizon_m=0.5")
 
 
+@pytest.mark.slow(seconds=10)
 def test_writes_the_sequence_contract(compose_config, tmp_path):
     out = tmp_path / "synthetic"
     out.mkdir()

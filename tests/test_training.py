@@ -78,6 +78,7 @@ def test_a_run_that_stopped_early_stays_stopped_when_run_again(tiny_config, tmp_
     assert ((tmp_path / "run" / "metrics.json").read_bytes(), (tmp_path / "run" / "checkpoints" / "best.ckpt").read_bytes()) == published
 
 
+@pytest.mark.slow(seconds=20)
 def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path, tiny_overrides):
     db = tmp_path / "mlflow.db"
     overrides = [*tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path}/runs/${{model.name}}",
@@ -93,6 +94,7 @@ def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path, tiny_o
     assert len(sweeps) == 1 and len(children) == 2
 
 
+@pytest.mark.slow(seconds=18)
 def test_optuna_search_trains_each_trial_and_reports_the_best(split_dir, tmp_path, tiny_overrides):
     sweep = tmp_path / "sweep"
     tiny = [o for o in tiny_overrides if not o.startswith("model.width=")]  # the search sets the width
@@ -108,6 +110,7 @@ def test_optuna_search_trains_each_trial_and_reports_the_best(split_dir, tmp_pat
     assert all((sweep / str(i) / "checkpoints" / "best.ckpt").is_file() for i in range(2))
 
 
+@pytest.mark.slow(seconds=10)
 def test_a_search_for_a_metric_the_stage_does_not_return_says_so(split_dir, tmp_path, tiny_overrides):
     overrides = [*tiny_overrides, f"data.split_dir={split_dir}", "trainer.fast_dev_run=true", "mlflow.enabled=false",
                  f"train.out_dir={tmp_path / 'run'}", "optimized_metric=val_accuracy"]  # fmt: skip
@@ -115,6 +118,7 @@ def test_a_search_for_a_metric_the_stage_does_not_return_says_so(split_dir, tmp_
     assert run.returncode == 2 and "optimized_metric=val_accuracy: this stage returned no such metric" in run.stderr
 
 
+@pytest.mark.slow(seconds=8)
 def test_a_callback_that_cannot_be_built_is_named(split_dir, tmp_path, tiny_overrides):
     overrides = [*tiny_overrides, f"data.split_dir={split_dir}", "trainer.fast_dev_run=true", "mlflow.enabled=false",
                  f"train.out_dir={tmp_path / 'run'}", "+callbacks.mine._target_=lightning.pytorch.callbacks.NoSuchCallback"]  # fmt: skip

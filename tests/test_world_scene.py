@@ -52,6 +52,7 @@ def laptop_worlds(compose_config):
     return cfg, [build_world(cfg.world, sequence_seed(cfg.synthesize.seed, i)) for i in range(cfg.synthesize.sequences)]
 
 
+@pytest.mark.slow(seconds=44)
 def test_laptop_preset_yields_enough_labels(laptop_worlds):
     cfg, worlds = laptop_worlds
     label = cfg.label
@@ -60,6 +61,7 @@ def test_laptop_preset_yields_enough_labels(laptop_worlds):
     assert count >= 300
 
 
+@pytest.mark.slow(seconds=16)
 def test_laptop_preset_shows_all_eight_classes(laptop_worlds):
     cfg, worlds = laptop_worlds
     camera = camera_for(cfg.world)
@@ -75,6 +77,7 @@ def _digest(folder) -> dict[str, str]:
     return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.slow(seconds=6)
 def test_same_seed_same_bytes(compose_config, tmp_path):
     cfg = compose_config("world.frames=2", "world.width=160", "world.height=96").world
     record_sequence(cfg, 11, tmp_path / "a")
