@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 from omegaconf import MISSING, OmegaConf
 
-from offroad_path.config import Config
+from offroad_path.config import Config, load_config
 from offroad_path.models import MODELS
 
 
@@ -49,3 +50,38 @@ def test_the_schemas_hold_no_values():
 def test_conf_gives_every_setting_a_value(compose_config, overrides):
     cfg = compose_config(*overrides)
     assert OmegaConf.missing_keys(cfg) == {"predict.input"}  # the one setting a user must give
+
+
+def path_settings(cfg, prefix: str = "") -> dict[str, str]:
+    """Every `*_dir`, `*_path`, `out`, `checkpoint` and `pilotnets` value of the config, resolved."""
+    found = {}
+    for key, value in cfg.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            found |= path_settings(value, f"{name}.")
+        elif isinstance(value, str) and (key.endswith(("_dir", "_path")) or key in ("out", "checkpoint") or "pilotnets" in name):
+            found[name] = value
+    return found
+
+
+def test_the_default_paths_are_the_committed_runs():
+    cfg = OmegaConf.to_container(load_config(), resolve=True)
+    paths = path_settings(cfg)
+    assert (paths["label.out_dir"], paths["label.metrics_path"], paths["evaluate.plots_dir"]) == (
+        "data/labels", "metrics/label.json", "metrics/precision_recall",
+    )  # fmt: skip
+    assert paths["train.out_dir"] == "data/runs/unet-none/seed0"
+
+
+def test_paths_own_puts_every_path_under_the_users_folder(tmp_path):
+    """The README's own-data recipe: with paths=own no stage reads or writes the project's data/ or metrics/."""
+    root = tmp_path / "field"
+    for overrides in ([], ["pretraining=segmentation"], ["experiment=paper"]):
+        cfg = OmegaConf.to_container(load_config("paths=own", f"paths.root={root}", *overrides), resolve=True)
+        paths = {k: v for k, v in path_settings(cfg).items() if not k.startswith("model.")}  # model.imagenet_weights: a file of yours
+        assert len(paths) > 25
+        outside = {k: v for k, v in paths.items() if not Path(v).is_relative_to(root)}
+        assert not outside, f"paths=own leaves these outside {root}: {outside}"
+    assert cfg["label"]["in_dir"] == str(root / "recordings")
+    with pytest.raises(Exception, match=r"paths\.root"):
+        OmegaConf.to_container(load_config("paths=own"), resolve=True)  # no folder given
