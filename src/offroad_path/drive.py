@@ -47,8 +47,10 @@ def check_policies(d: DictConfig, seed: int) -> None:
             checkpoint = checkpoint_of(name, d, seed)
             if checkpoint is not None and not checkpoint.is_file():
                 known = ", ".join([*d.pilotnets, *BUILT_IN])
-                raise FileNotFoundError(f"drive.arguments.{argument}: policy {name!r} needs {checkpoint}, which does not exist "
-                                        f"(policies: a run name of the train stage, that name{TEMPORAL}, or {known})")  # fmt: skip
+                raise FileNotFoundError(
+                    f"drive.arguments.{argument}: policy {name!r} needs {checkpoint}, which does not exist "
+                    f"(policies: a run name of the train stage, that name{TEMPORAL}, or {known})"
+                )
 
 
 @reads("drive", "world", "postprocess", "label", "mlflow", writes=outputs)
@@ -62,8 +64,10 @@ def run_drive(cfg: DictConfig) -> dict:
     check_policies(d, cfg.seed)
     worlds = test_worlds(Path(d.synthetic_dir), d.worlds)
     if len(worlds) * d.starts_per_world < 2:
-        raise ValueError(f"drive.starts_per_world: {len(worlds)} test world(s) x {d.starts_per_world} start(s) is one drive; "
-                         "intervals need at least 2 (more starts, or more test worlds)")  # fmt: skip
+        raise ValueError(
+            f"drive.starts_per_world: {len(worlds)} test world(s) x {d.starts_per_world} start(s) is one drive; "
+            "intervals need at least 2 (more starts, or more test worlds)"
+        )
     params = drive_params(cfg.postprocess, d.width, cfg.world.width)
     started = time.perf_counter()
     with atomic_directory(d.out_dir, "drive", key="drive.out_dir") as tmp:
@@ -79,8 +83,12 @@ def run_drive(cfg: DictConfig) -> dict:
         (tmp / "results.md").write_text(markdown)
         (tmp / "drive.json").write_text(json.dumps(metrics, indent=2) + "\n")
     write_text_atomic(d.metrics_path, json.dumps(metrics, indent=2) + "\n", "drive")
-    log.info("drove %d test worlds in %.0f s; %s", len(worlds), time.perf_counter() - started,
-             "; ".join(f"{a}: {m['finding']}" for a, m in metrics.items() if a in ARGUMENTS))  # fmt: skip
+    log.info(
+        "drove %d test worlds in %.0f s; %s",
+        len(worlds),
+        time.perf_counter() - started,
+        "; ".join(f"{a}: {m['finding']}" for a, m in metrics.items() if a in ARGUMENTS),
+    )
     log_to_mlflow(cfg, metrics)
     return metrics
 

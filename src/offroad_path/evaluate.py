@@ -35,8 +35,15 @@ def outputs(cfg: DictConfig) -> Outputs:
     """The evaluate stage's outputs and every input: the runs, their post-processed maps, the label
     runs, the split and the recordings behind it, PilotNet's predictions."""
     e = cfg.evaluate
-    inputs = [e.runs_dir, e.postprocessed_dir, e.labels_dir, Path(e.train_manifest).parent, *manifest_folders(e.train_manifest),
-              e.steering_from_paths.pilotnet_predictions, *(label_run_folders(e.real_labels_dir) if e.real_labels_dir else [])]  # fmt: skip
+    inputs = [
+        e.runs_dir,
+        e.postprocessed_dir,
+        e.labels_dir,
+        Path(e.train_manifest).parent,
+        *manifest_folders(e.train_manifest),
+        e.steering_from_paths.pilotnet_predictions,
+        *(label_run_folders(e.real_labels_dir) if e.real_labels_dir else []),
+    ]
     folders = {"evaluate.out_dir": e.out_dir, "evaluate.plots_dir": e.plots_dir}
     return Outputs("evaluate", folders=folders, files={"evaluate.metrics_path": e.metrics_path}, inputs=inputs)
 
@@ -53,9 +60,15 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
     results = ResultsTable()
     bootstrap = test_bootstrap(e, test.samples, cfg.split.block_m)
     # The report, section by section, in the order of results.md and metrics.json.
-    sections: list[Section] = [results, Uncertainty(bootstrap, cfg.split.block_m), Baselines(), SteeringFromPaths(e, bootstrap),
-                               ByCondition(bootstrap), Temporal(e, cfg.label, cfg.split.block_m),
-                               RealFootage(e, bootstrap, cfg.split.block_m, cfg.label.distance_m)]  # fmt: skip
+    sections: list[Section] = [
+        results,
+        Uncertainty(bootstrap, cfg.split.block_m),
+        Baselines(),
+        SteeringFromPaths(e, bootstrap),
+        ByCondition(bootstrap),
+        Temporal(e, cfg.label, cfg.split.block_m),
+        RealFootage(e, bootstrap, cfg.split.block_m, cfg.label.distance_m),
+    ]
     for section in sections:
         section.score(test)
     write_report(e, test, sections, results.table(), results.figures(test, e.figure_cases, e.figure_scale))

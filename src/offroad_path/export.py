@@ -48,8 +48,14 @@ def run_export(cfg: DictConfig) -> float:
         os.replace(tmp, out)
     finally:
         Path(tmp).unlink(missing_ok=True)
-    log.info("exported %s to %s (%d x %d input, dynamic batch); largest difference from PyTorch %.2e", e.checkpoint, out,
-             model.width, model.height, difference)  # fmt: skip
+    log.info(
+        "exported %s to %s (%d x %d input, dynamic batch); largest difference from PyTorch %.2e",
+        e.checkpoint,
+        out,
+        model.width,
+        model.height,
+        difference,
+    )
     return difference
 
 

@@ -60,9 +60,15 @@ def ingest(cfg: DictConfig) -> dict:
     epipolar = "not measurable" if meta["epipolar_error_px"] is None else f"{meta['epipolar_error_px']:.2f} px"
     log.info(
         "wrote %d rectified stereo pairs %dx%d (baseline %.3f m, fx %.1f px, epipolar error %s)%s to %s",
-        meta["frames"], c.width, c.height, meta["baseline_m"], meta["fx"], epipolar,
-        f", {meta['distance_m']:.1f} m of poses" if "distance_m" in meta else "", out_dir,
-    )  # fmt: skip
+        meta["frames"],
+        c.width,
+        c.height,
+        meta["baseline_m"],
+        meta["fx"],
+        epipolar,
+        f", {meta['distance_m']:.1f} m of poses" if "distance_m" in meta else "",
+        out_dir,
+    )
     return meta
 
 

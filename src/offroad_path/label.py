@@ -124,8 +124,10 @@ def label(cfg: DictConfig) -> dict:
         roots, names = [roots[i] for i in picked], [names[i] for i in picked]
         for root in roots:  # validate everything before any work
             check_inputs(open_sequence(root), cfg.label)
-    with stage_run(cfg, "label") if not sharded(cfg) else nullcontext() as run, \
-            atomic_directory(out_dir, "label", key="label.out_dir") as tmp:  # fmt: skip
+    with (
+        stage_run(cfg, "label") if not sharded(cfg) else nullcontext() as run,
+        atomic_directory(out_dir, "label", key="label.out_dir") as tmp,
+    ):
         if cfg.label.merge_from:
             for folder, summary in merged:
                 shutil.copytree(folder / summary["name"], tmp / summary["name"])
@@ -148,11 +150,17 @@ def label(cfg: DictConfig) -> dict:
             mlflow.log_artifact(str(tmp / "summary.json"))
     log.info(
         "labelled %d sequences%s: %d segments kept, %d dropped, %d labels written to %s%s",
-        metrics["sequences"], f" (shard {cfg.label.shard} of {cfg.label.shards})" if sharded(cfg) else "",
-        metrics["labels"], metrics["segments_dropped"], metrics["labels"], out_dir,
+        metrics["sequences"],
+        f" (shard {cfg.label.shard} of {cfg.label.shards})" if sharded(cfg) else "",
+        metrics["labels"],
+        metrics["segments_dropped"],
+        metrics["labels"],
+        out_dir,
         f"; VO drift {metrics['translation_drift_pct']:.2f} % (worst sequence {metrics['translation_drift_pct_worst']:.2f} %), "
-        f"{metrics['rotation_drift_deg_per_m']:.4f} deg/m" if "translation_drift_pct" in metrics else "",
-    )  # fmt: skip
+        f"{metrics['rotation_drift_deg_per_m']:.4f} deg/m"
+        if "translation_drift_pct" in metrics
+        else "",
+    )
     return metrics
 
 

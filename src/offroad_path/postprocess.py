@@ -58,8 +58,13 @@ def run_postprocess(cfg: DictConfig) -> int:
                 np.save(tmp / name, out.astype(np.float16))
                 written.append((sample, str(out_dir / name)))
         write_predictions_manifest(tmp / "manifest.csv", written)
-    log.info("post-processed %d maps of %s into %s (%.2f ms per map)", len(written), c.predictions_dir, out_dir,
-             1000 * seconds / max(len(written), 1))  # fmt: skip
+    log.info(
+        "post-processed %d maps of %s into %s (%.2f ms per map)",
+        len(written),
+        c.predictions_dir,
+        out_dir,
+        1000 * seconds / max(len(written), 1),
+    )
     return len(written)
 
 

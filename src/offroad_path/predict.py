@@ -70,8 +70,9 @@ def check_ground(cfg: DictConfig) -> None:
         return
     for key in ("camera_height_m", "camera_pitch_deg"):
         if cfg.predict.ros[key] is None:
-            raise ConfigValueError(f"predict.ros.{key} is required with a bag input (or ingest.footprint.{key}): "
-                                   "the path is put on the ground with it")  # fmt: skip
+            raise ConfigValueError(
+                f"predict.ros.{key} is required with a bag input (or ingest.footprint.{key}): the path is put on the ground with it"
+            )
 
 
 @reads("predict", "postprocess", "label", "ingest", "mlflow", writes=outputs)
@@ -88,8 +89,11 @@ def run_predict(cfg: DictConfig) -> dict:
     frames, model_seconds, start = 0, 0.0, time.perf_counter()
     # Encoding the PNGs and the video took as long as the network: a writer thread does it (OpenCV
     # lets go of the GIL) while the next frame is read and run; one thread keeps the video in order.
-    with atomic_directory(p.out_dir, "predict", key="predict.out_dir") as tmp, ThreadPoolExecutor(1) as writer, \
-            PredictionBag(tmp / "bag", p.ros, camera, p.threshold) if camera else nullcontext() as bag:  # fmt: skip
+    with (
+        atomic_directory(p.out_dir, "predict", key="predict.out_dir") as tmp,
+        ThreadPoolExecutor(1) as writer,
+        PredictionBag(tmp / "bag", p.ros, camera, p.threshold) if camera else nullcontext() as bag,
+    ):
         (tmp / "confidence").mkdir()
         (tmp / "overlay").mkdir()
         video, pending = None, deque()
@@ -116,10 +120,17 @@ def run_predict(cfg: DictConfig) -> dict:
         if video is not None:
             video.release()
     seconds = time.perf_counter() - start
-    summary = {"frames": frames, "threads": threads, "seconds": seconds, "fps": frames / seconds,
-               "model_fps": frames / max(model_seconds, 1e-9)}  # fmt: skip
-    print(f"{frames} frames in {seconds:.1f} s: {summary['fps']:.1f} frames/s end to end, {summary['model_fps']:.1f} frames/s "
-          f"in the model ({type(model).__name__}, {model.width} x {model.height}, {threads} threads); written to {p.out_dir}")  # fmt: skip
+    summary = {
+        "frames": frames,
+        "threads": threads,
+        "seconds": seconds,
+        "fps": frames / seconds,
+        "model_fps": frames / max(model_seconds, 1e-9),
+    }
+    print(
+        f"{frames} frames in {seconds:.1f} s: {summary['fps']:.1f} frames/s end to end, {summary['model_fps']:.1f} frames/s "
+        f"in the model ({type(model).__name__}, {model.width} x {model.height}, {threads} threads); written to {p.out_dir}"
+    )
     return summary
 
 

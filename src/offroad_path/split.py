@@ -35,8 +35,17 @@ def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int]
             f0 = int(label.stem)
             frames.append(Frame(name, f0, float(travelled[f0]), held_out))
             semantic = str(seq.semantic[f0]) if seq.semantic is not None else ""
-            samples[(name, f0)] = Sample(name, f0, False, str(seq.left[f0]), str(label), str(run.folder / "disparity" / label.name),
-                                         semantic, seq.calibration.fx, seq.calibration.baseline_m)  # fmt: skip
+            samples[(name, f0)] = Sample(
+                name,
+                f0,
+                False,
+                str(seq.left[f0]),
+                str(label),
+                str(run.folder / "disparity" / label.name),
+                semantic,
+                seq.calibration.fx,
+                seq.calibration.baseline_m,
+            )
     return frames, samples
 
 
@@ -72,12 +81,26 @@ def split(cfg: DictConfig) -> dict:
             counts[name] = len(rows)
         worlds = sorted({f.sequence for f in frames if f.held_out})
         test_blocks = len({block_of(f.sequence, f.travelled_m, c.block_m) for f in parts["test"]})
-        summary = {"frames": len(frames), "guarded_out": guarded, "samples": counts, "strategy": c.strategy, "mirror": c.mirror,
-                   "test_worlds": worlds, "test_blocks": test_blocks, "data_root": data_root(listed)}  # fmt: skip
+        summary = {
+            "frames": len(frames),
+            "guarded_out": guarded,
+            "samples": counts,
+            "strategy": c.strategy,
+            "mirror": c.mirror,
+            "test_worlds": worlds,
+            "test_blocks": test_blocks,
+            "data_root": data_root(listed),
+        }
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    log.info("split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones; test: %d blocks of driving%s",
-             len(frames), counts, " (with mirrored copies)" if c.mirror else "", guarded, test_blocks,
-             f" from {len(worlds)} held-out test worlds" if worlds else " from the drives")  # fmt: skip
+    log.info(
+        "split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones; test: %d blocks of driving%s",
+        len(frames),
+        counts,
+        " (with mirrored copies)" if c.mirror else "",
+        guarded,
+        test_blocks,
+        f" from {len(worlds)} held-out test worlds" if worlds else " from the drives",
+    )
     return summary
 
 

@@ -50,8 +50,11 @@ def stage_config(cfg: DictConfig, groups: tuple[str, ...], stage: str) -> DictCo
     """`cfg` cut down to `groups` and SHARED, interpolations resolved, struct and read-only."""
     if missing := [g for g in groups if g not in cfg]:
         raise KeyError(f"stage {stage} declares config groups that do not exist: {', '.join(missing)}")
-    kept = {key: OmegaConf.to_container(cfg[key], resolve=True) if isinstance(cfg[key], DictConfig) else cfg[key]
-            for key in (*groups, *SHARED) if key in cfg}  # fmt: skip
+    kept = {
+        key: OmegaConf.to_container(cfg[key], resolve=True) if isinstance(cfg[key], DictConfig) else cfg[key]
+        for key in (*groups, *SHARED)
+        if key in cfg
+    }
     out = OmegaConf.create(kept)
     OmegaConf.set_struct(out, True)
     OmegaConf.set_readonly(out, True)

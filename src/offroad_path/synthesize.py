@@ -39,8 +39,14 @@ def synthesize(cfg: DictConfig) -> list[dict]:
         (tmp / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
     frames = sum(s["frames"] for s in summaries)
     distance = sum(s["distance_m"] for s in summaries)
-    log.info("wrote %d sequences, %d of them held-out test worlds (%d stereo frames, %.0f m driven) to %s",
-             len(summaries), len(tested), frames, distance, out_dir)  # fmt: skip
+    log.info(
+        "wrote %d sequences, %d of them held-out test worlds (%d stereo frames, %.0f m driven) to %s",
+        len(summaries),
+        len(tested),
+        frames,
+        distance,
+        out_dir,
+    )
     return summaries
 
 

@@ -34,8 +34,9 @@ def train(cfg: DictConfig) -> dict:
         return {}
 
     metrics = fit_segmentation(cfg, "train", target="path", pretraining=cfg.pretraining, write_more=predictions)
-    log.info("%s-%s: best validation IoU %s, test IoU %.4f", cfg.model.name, cfg.pretraining.name, metrics["best_val_iou"],
-             metrics["test/iou"])  # fmt: skip
+    log.info(
+        "%s-%s: best validation IoU %s, test IoU %.4f", cfg.model.name, cfg.pretraining.name, metrics["best_val_iou"], metrics["test/iou"]
+    )
     return metrics
 
 

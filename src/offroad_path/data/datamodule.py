@@ -17,9 +17,22 @@ class OffroadDataModule(L.LightningDataModule):
 
     # Each argument is a hyper-parameter saved flat in the checkpoint (predict reads the input size
     # from it); build one from config with from_config.
-    def __init__(self, *, split_dir: str, target: str, width: int, height: int, batch_size: int,  # noqa: PLR0913
-                 num_workers: int, pin_memory: bool, augment: bool, jitter: float, min_scale: float, seed: int,
-                 cache_mb: float = 0):  # fmt: skip
+    def __init__(  # noqa: PLR0913
+        self,
+        *,
+        split_dir: str,
+        target: str,
+        width: int,
+        height: int,
+        batch_size: int,
+        num_workers: int,
+        pin_memory: bool,
+        augment: bool,
+        jitter: float,
+        min_scale: float,
+        seed: int,
+        cache_mb: float = 0,
+    ):
         super().__init__()
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
         self.split_dir = Path(split_dir)
@@ -43,8 +56,15 @@ class OffroadDataModule(L.LightningDataModule):
         transform = transforms(hp.width, hp.height, augmentation, seed=hp.seed)
         dataset = ManifestDataset(self.samples[name], hp.target, transform, hp.cache_mb)
         sampler = EpochSampler(len(dataset), hp.seed) if train else None
-        return DataLoader(dataset, batch_size=hp.batch_size, sampler=sampler, drop_last=train and len(dataset) > hp.batch_size,
-                          num_workers=hp.num_workers, pin_memory=hp.pin_memory, persistent_workers=hp.num_workers > 0)  # fmt: skip
+        return DataLoader(
+            dataset,
+            batch_size=hp.batch_size,
+            sampler=sampler,
+            drop_last=train and len(dataset) > hp.batch_size,
+            num_workers=hp.num_workers,
+            pin_memory=hp.pin_memory,
+            persistent_workers=hp.num_workers > 0,
+        )
 
     def train_dataloader(self) -> DataLoader:
         return self._loader("train", train=True)

@@ -48,8 +48,17 @@ def _sample(path: Path, number: int, r: dict) -> Sample:
         values = {}
         for column, parse in (("f0", int), ("mirrored", parse_boolean), ("fx", float), ("baseline_m", float)):
             values[column] = parse(r[column])
-        return Sample(r["sequence"], values["f0"], values["mirrored"], r["image"], r["label"], r["disparity"], r["semantic"],
-                      values["fx"], values["baseline_m"])  # fmt: skip
+        return Sample(
+            r["sequence"],
+            values["f0"],
+            values["mirrored"],
+            r["image"],
+            r["label"],
+            r["disparity"],
+            r["semantic"],
+            values["fx"],
+            values["baseline_m"],
+        )
     except (KeyError, ValueError, TypeError, AttributeError) as e:
         raise ValueError(f"{path}: row {number}, column {column}: {e}") from e
 

@@ -54,11 +54,19 @@ class PolicyScore:
         def iv(i: Interval) -> dict:
             return {"value": i.estimate, "low": i.low, "high": i.high}
 
-        return {"drives": self.drives, "route_m": self.route_m, "distance_m": self.distance_m, "interventions": self.interventions,
-                "interventions_per_km": iv(self.per_km), "autonomy_pct": iv(self.autonomy_pct),
-                "mean_offset_m": iv(self.mean_offset_m), "p95_offset_m": iv(self.p95_offset_m),
-                "water_entries_per_km": self.water_per_km, "no_path_steps": self.no_path_steps,
-                "interventions_by_cause": self.by_cause}  # fmt: skip
+        return {
+            "drives": self.drives,
+            "route_m": self.route_m,
+            "distance_m": self.distance_m,
+            "interventions": self.interventions,
+            "interventions_per_km": iv(self.per_km),
+            "autonomy_pct": iv(self.autonomy_pct),
+            "mean_offset_m": iv(self.mean_offset_m),
+            "p95_offset_m": iv(self.p95_offset_m),
+            "water_entries_per_km": self.water_per_km,
+            "no_path_steps": self.no_path_steps,
+            "interventions_by_cause": self.by_cause,
+        }
 
 
 def score(logs: list[DriveLog], intervention_s: float, resampling: Resampling) -> PolicyScore:
@@ -98,11 +106,16 @@ def versus_end_to_end(logs: dict[str, list[DriveLog]], end_to_end: list[str], re
 
 def table(scores: list[PolicyScore]) -> str:
     """A markdown table, one row per policy."""
-    rows = ["| policy | driven (m) | interventions | per km of route [95 % CI] | autonomy % [95 % CI] | mean offset (m) [95 % CI] | "
-            "95th pct offset (m) [95 % CI] | water entries per km | steps without a path |", "|" + " --- |" * 9]  # fmt: skip
+    rows = [
+        "| policy | driven (m) | interventions | per km of route [95 % CI] | autonomy % [95 % CI] | mean offset (m) [95 % CI] | "
+        "95th pct offset (m) [95 % CI] | water entries per km | steps without a path |",
+        "|" + " --- |" * 9,
+    ]
     for p in scores:
-        rows.append(f"| {p.policy} | {p.distance_m:.0f} | {p.interventions} | {p.per_km.text(1)} | {p.autonomy_pct.text(1)} | "
-                    f"{p.mean_offset_m.text(2)} | {p.p95_offset_m.text(2)} | {p.water_per_km:.1f} | {p.no_path_steps} |")  # fmt: skip
+        rows.append(
+            f"| {p.policy} | {p.distance_m:.0f} | {p.interventions} | {p.per_km.text(1)} | {p.autonomy_pct.text(1)} | "
+            f"{p.mean_offset_m.text(2)} | {p.p95_offset_m.text(2)} | {p.water_per_km:.1f} | {p.no_path_steps} |"
+        )
     return "\n".join(rows)
 
 
@@ -131,10 +144,12 @@ def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str]) -> 
     resampling = Resampling(d.bootstrap.resamples, d.bootstrap.seed, d.bootstrap.level)
     drives = len(worlds) * d.starts_per_world
     water = ", or into water" if d.water_intervenes else ""
-    sections = [f"# Closed-loop driving\n\n{len(worlds)} test worlds x {d.starts_per_world} start(s), {d.length_m:g} m of route each, "
-                f"at {d.speed_mps:g} m/s with {d.rate_hz:g} Hz control; {100 * d.bootstrap.level:g} % intervals by resampling the "
-                f"{drives} drives ({d.bootstrap.resamples} resamples). An intervention: the body more than {d.corridor_m:g} m from "
-                f"every centre line (track, forks, reference drive), or into an object{water}.\n"]  # fmt: skip
+    sections = [
+        f"# Closed-loop driving\n\n{len(worlds)} test worlds x {d.starts_per_world} start(s), {d.length_m:g} m of route each, "
+        f"at {d.speed_mps:g} m/s with {d.rate_hz:g} Hz control; {100 * d.bootstrap.level:g} % intervals by resampling the "
+        f"{drives} drives ({d.bootstrap.resamples} resamples). An intervention: the body more than {d.corridor_m:g} m from "
+        f"every centre line (track, forks, reference drive), or into an object{water}.\n"
+    ]
     metrics: dict = {}
     for argument, by_policy in logs.items():
         scores = [score(group, d.intervention_s, resampling) for group in by_policy.values()]

@@ -25,8 +25,14 @@ if TYPE_CHECKING:
 
 def parse_row(row: dict[str, str]) -> dict:
     """A conditions.csv row with its columns typed as frame_conditions writes them."""
-    return {"frame": int(row["frame"]), "shadow": float(row["shadow"]), "water": parse_boolean(row["water"]),
-            "fork": parse_boolean(row["fork"]), "surface": row["surface"], "bend_radius_m": float(row["bend_radius_m"])}  # fmt: skip
+    return {
+        "frame": int(row["frame"]),
+        "shadow": float(row["shadow"]),
+        "water": parse_boolean(row["water"]),
+        "fork": parse_boolean(row["fork"]),
+        "surface": row["surface"],
+        "bend_radius_m": float(row["bend_radius_m"]),
+    }
 
 
 def read_conditions(samples: list[Sample]) -> list[dict] | None:
@@ -94,8 +100,9 @@ class ConditionTable:
         return out
 
 
-def by_condition(conditions: list[dict], per_image: dict[str, np.ndarray], bootstrap: BlockBootstrap | None = None,
-                 sequences: list[str] | None = None) -> ConditionTable:  # fmt: skip
+def by_condition(
+    conditions: list[dict], per_image: dict[str, np.ndarray], bootstrap: BlockBootstrap | None = None, sequences: list[str] | None = None
+) -> ConditionTable:
     """per_image: method -> its (N, 4) per-image counts [tp, fp, tn, fn] over the same samples;
     bootstrap: intervals over each group's blocks; sequences: each sample's, to count them per group."""
     masks = [np.array([test(row) for row in conditions], bool) for _, _, test in GROUPS]

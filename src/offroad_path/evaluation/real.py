@@ -114,9 +114,11 @@ class Separability:
         return bool(self.largest_gain > self.width)
 
     def sentence(self) -> str:
-        head = (f"Label diversity (mean IoU between different frames' labels): {self.diversity:.3f}; the largest gain a perfect "
-                f"predictor could show over the other frames' labels: {self.largest_gain:.3f}; the widest 95 % interval of an IoU "
-                f"below ({self.resampled}) is {self.width:.3f} wide.")  # fmt: skip
+        head = (
+            f"Label diversity (mean IoU between different frames' labels): {self.diversity:.3f}; the largest gain a perfect "
+            f"predictor could show over the other frames' labels: {self.largest_gain:.3f}; the widest 95 % interval of an IoU "
+            f"below ({self.resampled}) is {self.width:.3f} wide."
+        )
         if self.separable:
             return head + " The recording can separate perception from a prior."
         return head + " **This recording cannot separate perception from a prior**: no result below says whether a network perceives."

@@ -53,8 +53,10 @@ class TestSet:
         for run in e.runs:
             for seed in e.seeds:
                 folder = f"{run}/seed{seed}"
-                for pp, manifest, made_by in (("no", Path(e.runs_dir) / folder / "predictions" / "manifest.csv", "train"),
-                                              ("yes", Path(e.postprocessed_dir) / folder / "manifest.csv", "postprocess")):  # fmt: skip
+                for pp, manifest, made_by in (
+                    ("no", Path(e.runs_dir) / folder / "predictions" / "manifest.csv", "train"),
+                    ("yes", Path(e.postprocessed_dir) / folder / "manifest.csv", "postprocess"),
+                ):
                     rows = read_predictions_manifest(manifest, made_by)
                     if samples and [s for s, _ in rows] != samples:
                         raise ValueError(f"{manifest}: lists other test samples than the runs before it (retrain on the same split)")

@@ -62,8 +62,10 @@ class ResultsTable:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
 
     def markdown(self) -> str:
-        return ("# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
-                "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(self.table()))  # fmt: skip
+        return (
+            "# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
+            "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(self.table())
+        )
 
     def metrics(self) -> dict:
         return {run: {PP_KEY[pp]: numbers(self.rows[run, pp]) for pp in POSTPROCESSING} for run in self.runs}
@@ -72,8 +74,10 @@ class ResultsTable:
         return max(runs or self.runs, key=lambda run: self.rows[run, "no"].iou)
 
     def figures(self, test: TestSet, cases: int, scale: float) -> dict[str, np.ndarray]:
-        return {"good_and_bad_cases.png": self.cases_figure(test, cases, scale),
-                "postprocessing.png": self.postprocessing_figure(test, cases, scale)}  # fmt: skip
+        return {
+            "good_and_bad_cases.png": self.cases_figure(test, cases, scale),
+            "postprocessing.png": self.postprocessing_figure(test, cases, scale),
+        }
 
     def cases_figure(self, test: TestSet, cases: int, scale: float) -> np.ndarray:
         """Fig. 8: each network's best run, its best and worst test images by IoU."""
@@ -92,8 +96,10 @@ class ResultsTable:
         before, after = self.per_image_iou[best, "no"], self.per_image_iou[best, "yes"]
         order = np.argsort(-(after - before), kind="stable")
         picks = list(dict.fromkeys([*order[:cases], *order[::-1][:cases]]))
-        rows = [(test.samples[i], *load_maps([test.paths[best, "no"][i], test.paths[best, "yes"][i]]), float(before[i]), float(after[i]))
-                for i in picks]  # fmt: skip
+        rows = [
+            (test.samples[i], *load_maps([test.paths[best, "no"][i], test.paths[best, "yes"][i]]), float(before[i]), float(after[i]))
+            for i in picks
+        ]
         return before_and_after(rows, scale)
 
 
@@ -115,8 +121,10 @@ class Baselines:
 
     def markdown(self) -> str:
         rows = [BaselineRow(baseline_name(key), s.accuracy, s.recall, s.precision, s.iou) for key, s in self.scores.items()]
-        return ("\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
-                "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(rows))  # fmt: skip
+        return (
+            "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
+            "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(rows)
+        )
 
     def metrics(self) -> dict:
         return {"baselines": {name: numbers(s) for name, s in self.scores.items()}}
@@ -159,9 +167,12 @@ class SteeringFromPaths:
     def _against_pilotnet(self) -> str:
         if not self.against_pilotnet:
             return ""
-        lines = ["\nPaired block-bootstrap intervals (the uncertainty section's resamples) of each path network's error minus "
-                 "PilotNet's, on the same frames; below 0: the path network steers closer to the true angle.\n",
-                 "| method | MAE difference, path + pure pursuit - PilotNet [95 % interval] |", "| --- | --- |"]  # fmt: skip
+        lines = [
+            "\nPaired block-bootstrap intervals (the uncertainty section's resamples) of each path network's error minus "
+            "PilotNet's, on the same frames; below 0: the path network steers closer to the true angle.\n",
+            "| method | MAE difference, path + pure pursuit - PilotNet [95 % interval] |",
+            "| --- | --- |",
+        ]
         lines += [f"| {method_title(run)} | {i.difference_text()} |" for run, i in self.against_pilotnet.items()]
         return "\n".join(lines) + "\n"
 
@@ -263,7 +274,10 @@ class RealFootage:
         if self.rows is None:
             return {}
         s = self.separability
-        recording = {"label_diversity": round(s.diversity, 6), "largest_gain": round(s.largest_gain, 6),
-                     "widest_iou_interval": None if s.width != s.width else round(s.width, 6),
-                     "separable": s.separable}  # fmt: skip
+        recording = {
+            "label_diversity": round(s.diversity, 6),
+            "largest_gain": round(s.largest_gain, 6),
+            "widest_iou_interval": None if s.width != s.width else round(s.width, 6),
+            "separable": s.separable,
+        }
         return {"real_footage": {"recording": recording} | {key: numbers(row) for key, row in self.rows.items()}}

@@ -54,8 +54,9 @@ def frame_geometry(samples: list[Sample], labels_dir: Path) -> list[FrameGeometr
         K = seq.calibration.K
         if s.mirrored:
             K[0, 2] = seq.image_size[0] - 1 - K[0, 2]
-        camera = GroundCamera(K, seq.meta["camera_height_m"], seq.meta.get("camera_pitch_deg", 0.0),
-                              vehicle["camera_forward_m"] + vehicle["wheelbase_m"] / 2)  # fmt: skip
+        camera = GroundCamera(
+            K, seq.meta["camera_height_m"], seq.meta.get("camera_pitch_deg", 0.0), vehicle["camera_forward_m"] + vehicle["wheelbase_m"] / 2
+        )
         true = float(seq.steering[s.f0]) * (-1 if s.mirrored else 1)
         out.append(FrameGeometry(camera, vehicle["wheelbase_m"], vehicle["max_steering_deg"], true))
     return out

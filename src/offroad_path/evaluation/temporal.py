@@ -126,8 +126,10 @@ def filtered(confidence: np.ndarray, block: Block, alpha: float) -> np.ndarray:
     """The temporal filter over a block's confidence maps (n, H, W), with VO poses and stereo depth."""
     K, vo = block.run.sequence.calibration.K, block.run.poses
     f = TemporalFilter(alpha)
-    fused = [f(c, d, K, np.linalg.inv(vo[a]) @ vo[b]) for c, d, a, b in
-             zip(confidence, block.stereo_depth, [block.frames[0], *block.frames[:-1]], block.frames, strict=True)]  # fmt: skip
+    fused = [
+        f(c, d, K, np.linalg.inv(vo[a]) @ vo[b])
+        for c, d, a, b in zip(confidence, block.stereo_depth, [block.frames[0], *block.frames[:-1]], block.frames, strict=True)
+    ]
     return np.stack(fused)
 
 
@@ -164,12 +166,23 @@ def score_temporal(
             steady += stability(confidence > e.threshold, block)
             steady_fused += stability(smooth > e.threshold, block)
         raw_counts, fused_counts = counts(np.concatenate(raw), labels, e.threshold), counts(np.concatenate(fused), labels, e.threshold)
-        gain = (paired_interval(block_sums(fused_counts, frame_blocks), block_sums(raw_counts, frame_blocks), iou, resampling)
-                if len(blocks) >= 2 else None)  # fmt: skip
+        gain = (
+            paired_interval(block_sums(fused_counts, frame_blocks), block_sums(raw_counts, frame_blocks), iou, resampling)
+            if len(blocks) >= 2
+            else None
+        )
         rows[run] = TemporalRow(
-            method_title(run), len(labels), pooled(raw_counts).iou, pooled(fused_counts).iou, float(np.mean(steady)),
-            float(np.mean(steady_fused)), *((gain.low, gain.high) if gain is not None else ()),
-        )  # fmt: skip
-        log.info("%s on every test-block frame: IoU %.3f (filtered %.3f), stability %.3f (filtered %.3f)", run, *(
-            getattr(rows[run], k) for k in ("iou", "iou_filtered", "stability", "stability_filtered")))  # fmt: skip
+            method_title(run),
+            len(labels),
+            pooled(raw_counts).iou,
+            pooled(fused_counts).iou,
+            float(np.mean(steady)),
+            float(np.mean(steady_fused)),
+            *((gain.low, gain.high) if gain is not None else ()),
+        )
+        log.info(
+            "%s on every test-block frame: IoU %.3f (filtered %.3f), stability %.3f (filtered %.3f)",
+            run,
+            *(getattr(rows[run], k) for k in ("iou", "iou_filtered", "stability", "stability_filtered")),
+        )
     return rows

@@ -102,8 +102,10 @@ class Uncertainty:
                 self.over_seeds[key] = (float(np.mean(ious)), float(np.std(ious, ddof=1)))
         b = self.bootstrap
         self.intervals = {key: b.interval(counts, iou) for key, counts in test.counts.items()}
-        self.others = {key: {name: b.interval(counts, SCORES[name]) for name in ("precision", "recall", "accuracy")}
-                       for key, counts in test.counts.items()}  # fmt: skip
+        self.others = {
+            key: {name: b.interval(counts, SCORES[name]) for name in ("precision", "recall", "accuracy")}
+            for key, counts in test.counts.items()
+        }
         self.differences = [(key, title, b.paired(test.counts[x], test.counts[y], iou)) for key, title, x, y in comparisons(test.runs)]
 
     def markdown(self) -> str:
@@ -119,9 +121,11 @@ class Uncertainty:
         runs = list(dict.fromkeys(run for run, _ in self.intervals))
         columns = ["IoU, raw [95 % interval]", "IoU, post-processed [95 % interval]"]
         if self.over_seeds:
-            lines.append(f"Each method's counts are pooled over its {len(self.seeds)} training seeds ({', '.join(map(str, self.seeds))}), "
-                         "and a comparison scores both methods' seed-pooled counts on the same resamples; beside each interval, "
-                         "the mean and sample standard deviation of the seeds' own IoU.\n")  # fmt: skip
+            lines.append(
+                f"Each method's counts are pooled over its {len(self.seeds)} training seeds ({', '.join(map(str, self.seeds))}), "
+                "and a comparison scores both methods' seed-pooled counts on the same resamples; beside each interval, "
+                "the mean and sample standard deviation of the seeds' own IoU.\n"
+            )
             columns = [columns[0], "raw, over seeds", columns[1], "post-processed, over seeds"]
         lines += ["| method | " + " | ".join(columns) + " |", "|" + " --- |" * (1 + len(columns))]
         lines += [f"| {method_title(run)} | " + " | ".join(self._cells(run, pp) for pp in POSTPROCESSING) + " |" for run in runs]

@@ -45,8 +45,18 @@ def export_onnx(model: SegmentationNet, width: int, height: int, out: Path, opse
     with torch.no_grad():
         reference = wrapped(example).numpy()
         batch = torch.export.Dim("batch", min=1, max=1024)
-        torch.onnx.export(wrapped, (example,), str(out), input_names=["image"], output_names=["confidence"], opset_version=opset,
-                          dynamic_shapes={"image": {0: batch}}, dynamo=True, external_data=False, verbose=False)  # fmt: skip
+        torch.onnx.export(
+            wrapped,
+            (example,),
+            str(out),
+            input_names=["image"],
+            output_names=["confidence"],
+            opset_version=opset,
+            dynamic_shapes={"image": {0: batch}},
+            dynamo=True,
+            external_data=False,
+            verbose=False,
+        )
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     exported = session.run(["confidence"], {"image": example.numpy()})[0]
     return float(np.abs(exported - reference).max())

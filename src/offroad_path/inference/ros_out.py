@@ -31,7 +31,7 @@ ACKERMANN = {
         "float32 steering_angle\nfloat32 steering_angle_velocity\nfloat32 speed\nfloat32 acceleration\nfloat32 jerk\n"
     ),
     "ackermann_msgs/msg/AckermannDriveStamped": "std_msgs/Header header\nackermann_msgs/AckermannDrive drive\n",
-}  # fmt: skip
+}
 
 
 def typestore() -> Any:
@@ -60,8 +60,12 @@ class PredictionBag:
         self.store, self.ros, self.camera, self.threshold = typestore(), ros, camera, threshold
         self.writer = Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        kinds = {"confidence": "sensor_msgs/msg/Image", "overlay/compressed": "sensor_msgs/msg/CompressedImage",
-                 "path": "nav_msgs/msg/Path", "steering": STEERING_TYPES[ros.steering]}  # fmt: skip
+        kinds = {
+            "confidence": "sensor_msgs/msg/Image",
+            "overlay/compressed": "sensor_msgs/msg/CompressedImage",
+            "path": "nav_msgs/msg/Path",
+            "steering": STEERING_TYPES[ros.steering],
+        }
         ns = ros.namespace.rstrip("/")
         self.connections = {kind: self.writer.add_connection(f"{ns}/{kind}", t, typestore=self.store) for kind, t in kinds.items()}
 
@@ -88,21 +92,29 @@ class PredictionBag:
         t = self.store.types
         grey = np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8)
         height, width = grey.shape
-        image = t["sensor_msgs/msg/Image"](header=header, height=height, width=width, encoding="mono8", is_bigendian=0, step=width,
-                                           data=grey.ravel())  # fmt: skip
+        image = t["sensor_msgs/msg/Image"](
+            header=header, height=height, width=width, encoding="mono8", is_bigendian=0, step=width, data=grey.ravel()
+        )
         ok, jpeg = cv2.imencode(".jpg", overlay_bgr, [cv2.IMWRITE_JPEG_QUALITY, self.ros.jpeg_quality])
         if not ok:
             raise ValueError("OpenCV could not encode the overlay as JPEG")
         overlay = t["sensor_msgs/msg/CompressedImage"](header=header, format="jpeg", data=jpeg.ravel())
         identity = t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
-        poses = [t["geometry_msgs/msg/PoseStamped"](header=header, pose=t["geometry_msgs/msg/Pose"](
-                     position=t["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z)), orientation=identity))
-                 for x, y, z in centre]  # fmt: skip
+        poses = [
+            t["geometry_msgs/msg/PoseStamped"](
+                header=header,
+                pose=t["geometry_msgs/msg/Pose"](
+                    position=t["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z)), orientation=identity
+                ),
+            )
+            for x, y, z in centre
+        ]
         path = t["nav_msgs/msg/Path"](header=header, poses=poses)
         angle, speed = (0.0, 0.0) if steering_rad is None else (steering_rad, self.ros.speed_mps)
         if self.ros.steering == "ackermann":
-            drive = t["ackermann_msgs/msg/AckermannDrive"](steering_angle=angle, steering_angle_velocity=0.0, speed=speed,
-                                                           acceleration=0.0, jerk=0.0)  # fmt: skip
+            drive = t["ackermann_msgs/msg/AckermannDrive"](
+                steering_angle=angle, steering_angle_velocity=0.0, speed=speed, acceleration=0.0, jerk=0.0
+            )
             command = t["ackermann_msgs/msg/AckermannDriveStamped"](header=header, drive=drive)
         else:
             turn = t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=speed * math.tan(angle) / self.ros.wheelbase_m)

@@ -43,8 +43,13 @@ def is_bag(path: Path) -> bool:
     return path.suffix.lower() in (".bag", ".mcap") if path.is_file() else (path / "metadata.yaml").is_file()
 
 
-def open_source(path: str | Path, disparity_cfg=None, max_frames: int | None = None, max_pixels: int = MAX_IMAGE_PIXELS,
-                ingest: DictConfig | None = None) -> FrameSource:  # fmt: skip
+def open_source(
+    path: str | Path,
+    disparity_cfg=None,
+    max_frames: int | None = None,
+    max_pixels: int = MAX_IMAGE_PIXELS,
+    ingest: DictConfig | None = None,
+) -> FrameSource:
     """Frames of `path`; stereo depth (StereoSGBM with disparity_cfg) for sequences and bags when
     given a config. Every image's declared size is checked against max_pixels before anything is
     decoded. A bag is read with `ingest`'s topics, calibration and rectified size."""

@@ -38,8 +38,14 @@ class VehicleFootprint:
     def corners(self) -> np.ndarray:
         """Rear-left, rear-right, front-right, front-left on the ground, in the camera frame (4, 3)."""
         w = self.width_m / 2
-        level = np.array([[-w, self.camera_height_m, self.rear_m], [w, self.camera_height_m, self.rear_m],
-                          [w, self.camera_height_m, self.front_m], [-w, self.camera_height_m, self.front_m]])  # fmt: skip
+        level = np.array(
+            [
+                [-w, self.camera_height_m, self.rear_m],
+                [w, self.camera_height_m, self.rear_m],
+                [w, self.camera_height_m, self.front_m],
+                [-w, self.camera_height_m, self.front_m],
+            ]
+        )
         tilt = np.deg2rad(self.camera_pitch_deg)
         # Vehicle-level (x, down, forward) to the camera pitched down by `tilt` about x.
         rotation = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(tilt), -np.sin(tilt)], [0.0, np.sin(tilt), np.cos(tilt)]])

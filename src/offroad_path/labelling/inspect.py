@@ -186,8 +186,10 @@ def main(argv: list[str] | None = None) -> None:
     with clear_errors():
         out = args.out or args.labels.parent / f"{args.labels.name}_inspect"
         checks = inspect(args.labels, args.recording, out, args.points_every)
-    print(f"wrote {out}: one .rrd per sequence (open with `rerun {out}/<sequence>.rrd`), summary.png, checks.json"
-          + "".join(f"\n{name}: FLAG {flag}" for name, check in checks.items() for flag in check["flags"]))  # fmt: skip
+    print(
+        f"wrote {out}: one .rrd per sequence (open with `rerun {out}/<sequence>.rrd`), summary.png, checks.json"
+        + "".join(f"\n{name}: FLAG {flag}" for name, check in checks.items() for flag in check["flags"])
+    )
 
 
 if __name__ == "__main__":

@@ -48,8 +48,13 @@ class LabelRun:
     @classmethod
     def read(cls, folder: Path) -> LabelRun:
         vo = folder / "poses_vo.txt"
-        return cls(folder, read_poses(vo) if vo.is_file() else None, read_rows(folder / "steps.csv"), read_rows(folder / "report.csv"),
-                   read_rows(folder / "drift.csv"))  # fmt: skip
+        return cls(
+            folder,
+            read_poses(vo) if vo.is_file() else None,
+            read_rows(folder / "steps.csv"),
+            read_rows(folder / "report.csv"),
+            read_rows(folder / "drift.csv"),
+        )
 
     @property
     def kept(self) -> list[dict]:
@@ -85,20 +90,30 @@ class FootprintCheck:
             return {"pixels": 0, "flags": ["no footprint pixel has stereo depth: nothing to check"]}
         median = float(np.median(ratio))
         near, far = ratio[depth < NEAR_M], ratio[depth >= FAR_M]
-        out = {"pixels": len(ratio), "median_ratio": median, "implied_camera_height_m": camera_height_m * median,
-               "near_ratio": float(np.median(near)) if len(near) else None,
-               "far_ratio": float(np.median(far)) if len(far) else None}  # fmt: skip
+        out = {
+            "pixels": len(ratio),
+            "median_ratio": median,
+            "implied_camera_height_m": camera_height_m * median,
+            "near_ratio": float(np.median(near)) if len(near) else None,
+            "far_ratio": float(np.median(far)) if len(far) else None,
+        }
         flags = []
         if median < 1 - TOLERANCE:
-            flags.append(f"height: labels sink (stereo/footprint {median:.2f}): camera_height_m {camera_height_m:g} is too large; "
-                         f"the stereo implies {out['implied_camera_height_m']:.2f} m")  # fmt: skip
+            flags.append(
+                f"height: labels sink (stereo/footprint {median:.2f}): camera_height_m {camera_height_m:g} is too large; "
+                f"the stereo implies {out['implied_camera_height_m']:.2f} m"
+            )
         elif median > 1 + TOLERANCE:
-            flags.append(f"height: labels float (stereo/footprint {median:.2f}): camera_height_m {camera_height_m:g} is too small; "
-                         f"the stereo implies {out['implied_camera_height_m']:.2f} m")  # fmt: skip
+            flags.append(
+                f"height: labels float (stereo/footprint {median:.2f}): camera_height_m {camera_height_m:g} is too small; "
+                f"the stereo implies {out['implied_camera_height_m']:.2f} m"
+            )
         if out["near_ratio"] is not None and out["far_ratio"] is not None and abs(out["far_ratio"] - out["near_ratio"]) > TOLERANCE:
             way = "too small" if out["far_ratio"] > out["near_ratio"] else "too large"
-            flags.append(f"pitch: the ratio goes from {out['near_ratio']:.2f} under {NEAR_M:g} m to {out['far_ratio']:.2f} beyond "
-                         f"{FAR_M:g} m: camera_pitch_deg looks {way}")  # fmt: skip
+            flags.append(
+                f"pitch: the ratio goes from {out['near_ratio']:.2f} under {NEAR_M:g} m to {out['far_ratio']:.2f} beyond "
+                f"{FAR_M:g} m: camera_pitch_deg looks {way}"
+            )
         out["flags"] = flags
         return out
 
@@ -147,8 +162,11 @@ def summary_figure(name: str, runs: dict[str, LabelRun], checks: dict[str, dict]
             ax.plot(check["curve_depth"], check["curve_ratio"], marker=".", label=seq)
     ax.axhline(1.0, color="k", lw=0.8)
     ax.axhspan(1 - TOLERANCE, 1 + TOLERANCE, color="g", alpha=0.1)
-    ax.set(title="footprint against stereo: <1 sinks, >1 floats; a slope is a pitch error", xlabel="footprint depth, m",
-           ylabel="median stereo / footprint depth")  # fmt: skip
+    ax.set(
+        title="footprint against stereo: <1 sinks, >1 floats; a slope is a pitch error",
+        xlabel="footprint depth, m",
+        ylabel="median stereo / footprint depth",
+    )
     if ax.lines[1:]:
         ax.legend(fontsize=6, ncol=3)
     ax = axes[1, 1]

@@ -59,8 +59,11 @@ def read_shards(label: DictConfig, names: list[str]) -> list[tuple[Path, dict]]:
         if record["config"] != digest:
             raise InputError(folder, f"was labelled with another label config (digest {record['config']}, this one {digest})")
         if record["shard"] in seen or record["shards"] != len(folders):
-            raise InputError(folder, f"shard {record['shard']} of {record['shards']}, but {root} holds {len(folders)} shard folders "
-                             f"(shards {sorted(seen | {record['shard']})} so far)")  # fmt: skip
+            raise InputError(
+                folder,
+                f"shard {record['shard']} of {record['shards']}, but {root} holds {len(folders)} shard folders "
+                f"(shards {sorted(seen | {record['shard']})} so far)",
+            )
         seen.add(record["shard"])
         summaries = json.loads((folder / "summary.json").read_text())["sequences"]
         for summary in summaries:

@@ -108,9 +108,15 @@ class FrontEnd:
         if len(xyz) < 6:
             return None, keep
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
-            xyz.astype(np.float64), uv.astype(np.float64), self.K, None, iterationsCount=self.cfg.ransac_iterations,
-            reprojectionError=self.cfg.ransac_reprojection_px, confidence=0.999, flags=cv2.SOLVEPNP_ITERATIVE,
-        )  # fmt: skip
+            xyz.astype(np.float64),
+            uv.astype(np.float64),
+            self.K,
+            None,
+            iterationsCount=self.cfg.ransac_iterations,
+            reprojectionError=self.cfg.ransac_reprojection_px,
+            confidence=0.999,
+            flags=cv2.SOLVEPNP_ITERATIVE,
+        )
         if not found or inliers is None:
             return None, keep
         keep[inliers[:, 0]] = True

@@ -115,9 +115,15 @@ def drift(
             true = path_length(ref[i : j + 1])
             ratio = np.linalg.norm(est[j, :3, 3] - est[i, :3, 3]) / np.linalg.norm(ref[j, :3, 3] - ref[i, :3, 3])
             segments.append(
-                {"from": first + i, "to": first + j, "length_m": float(true), "translation_pct": float(100 * t / true),
-                 "rotation_deg_per_m": float(r / true), "scale_ratio": float(ratio)}
-            )  # fmt: skip
+                {
+                    "from": first + i,
+                    "to": first + j,
+                    "length_m": float(true),
+                    "translation_pct": float(100 * t / true),
+                    "rotation_deg_per_m": float(r / true),
+                    "scale_ratio": float(ratio),
+                }
+            )
     if not segments:
         return None, f"evo found no {segment_m:g} m segment within a piece of odometry without failure"
     ratios = [s["scale_ratio"] for s in segments]

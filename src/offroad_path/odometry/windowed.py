@@ -133,10 +133,19 @@ class WindowedOdometry:
             self._poses[k] = self._poses[keyframe] @ relative
         poses = np.array(self._poses)
         steps = [
-            StepResult(s.ok, np.linalg.inv(poses[k + 1]) @ poses[k], s.features, s.tracked, s.inliers, s.reason, s.fallback,
-                       s.keyframe, s.disparity_offset_px)
+            StepResult(
+                s.ok,
+                np.linalg.inv(poses[k + 1]) @ poses[k],
+                s.features,
+                s.tracked,
+                s.inliers,
+                s.reason,
+                s.fallback,
+                s.keyframe,
+                s.disparity_offset_px,
+            )
             for k, s in enumerate(self._steps)
-        ]  # fmt: skip
+        ]
         return poses, steps
 
     def rig_offsets(self) -> tuple[float | None, float | None]:

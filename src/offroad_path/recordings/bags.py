@@ -22,10 +22,14 @@ INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
 # ROS encodings to OpenCV conversions to BGR (cv_bridge's table: OpenCV names Bayer by the second row).
 COLOUR = {
-    "rgb8": cv2.COLOR_RGB2BGR, "rgba8": cv2.COLOR_RGBA2BGR, "bgra8": cv2.COLOR_BGRA2BGR,
-    "bayer_rggb8": cv2.COLOR_BayerBG2BGR, "bayer_bggr8": cv2.COLOR_BayerRG2BGR,
-    "bayer_gbrg8": cv2.COLOR_BayerGR2BGR, "bayer_grbg8": cv2.COLOR_BayerGB2BGR,
-}  # fmt: skip
+    "rgb8": cv2.COLOR_RGB2BGR,
+    "rgba8": cv2.COLOR_RGBA2BGR,
+    "bgra8": cv2.COLOR_BGRA2BGR,
+    "bayer_rggb8": cv2.COLOR_BayerBG2BGR,
+    "bayer_bggr8": cv2.COLOR_BayerRG2BGR,
+    "bayer_gbrg8": cv2.COLOR_BayerGR2BGR,
+    "bayer_grbg8": cv2.COLOR_BayerGB2BGR,
+}
 CHANNELS = {"mono8": 1, "8uc1": 1, "bgr8": 3, "8uc3": 3, "rgb8": 3, "rgba8": 4, "bgra8": 4, "mono16": 1, "16uc1": 1} | {
     k: 1 for k in COLOUR if k.startswith("bayer")
 }
@@ -96,12 +100,18 @@ class Bag:
         images = [t for t, (m, _) in topics.items() if m in IMAGE_TYPES and topics.get(info_topic_for(t), ("",))[0] == INFO_TYPE]
         if len(images) != 2:
             listing = ", ".join(t for t, (m, _) in topics.items() if m in IMAGE_TYPES) or "none"
-            raise InputError(self.path, f"holds {len(images)} image topics with a CameraInfo beside them, not one stereo pair "
-                                        f"(its image topics: {listing}); give ingest.topics.left and ingest.topics.right")  # fmt: skip
+            raise InputError(
+                self.path,
+                f"holds {len(images)} image topics with a CameraInfo beside them, not one stereo pair "
+                f"(its image topics: {listing}); give ingest.topics.left and ingest.topics.right",
+            )
         tx = [float(self.first(info_topic_for(t), (INFO_TYPE,), "CameraInfo").p[3]) for t in images]
         if tx[0] == tx[1]:
-            raise InputError(self.path, f"{images[0]} and {images[1]} have the same CameraInfo baseline term (P[3] = {tx[0]}): "
-                                        "which is left is unknown; give ingest.topics.left and ingest.topics.right")  # fmt: skip
+            raise InputError(
+                self.path,
+                f"{images[0]} and {images[1]} have the same CameraInfo baseline term (P[3] = {tx[0]}): "
+                "which is left is unknown; give ingest.topics.left and ingest.topics.right",
+            )
         return (images[0], images[1]) if tx[0] > tx[1] else (images[1], images[0])
 
     def rig(self, left_info: str, right_info: str) -> StereoRig:
@@ -155,8 +165,11 @@ def decode_image(msg: Any, topic: str, source: Path, max_pixels: int = MAX_IMAGE
     its header when it declares more than max_pixels."""
     width, height = compressed_size(msg, topic, source) if hasattr(msg, "format") else (msg.width, msg.height)
     if width * height > max_pixels:
-        raise InputError(source, f"{topic}: a frame at {stamp_s(msg):.6f} s declares {width}x{height} pixels, more than the "
-                                 f"{max_pixels:,} allowed; it is not decoded")  # fmt: skip
+        raise InputError(
+            source,
+            f"{topic}: a frame at {stamp_s(msg):.6f} s declares {width}x{height} pixels, more than the "
+            f"{max_pixels:,} allowed; it is not decoded",
+        )
     if hasattr(msg, "format"):  # CompressedImage: JPEG or PNG bytes
         image = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:

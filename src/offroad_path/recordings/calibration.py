@@ -153,8 +153,10 @@ def camera_info_dict(msg: Any) -> dict:
     """A CameraInfo message (ROS 1: K D R P, ROS 2: k d r p) as the dict rig_from_camera_infos reads."""
     fields = {k: getattr(msg, k) if hasattr(msg, k) else getattr(msg, k.upper()) for k in ("k", "d", "r", "p")}
     return {k: np.asarray(v, np.float64) for k, v in fields.items()} | {
-        "width": int(msg.width), "height": int(msg.height), "distortion_model": str(msg.distortion_model),
-    }  # fmt: skip
+        "width": int(msg.width),
+        "height": int(msg.height),
+        "distortion_model": str(msg.distortion_model),
+    }
 
 
 def _yaml(path: Path) -> dict:
@@ -198,8 +200,10 @@ def _opencv(path: Path) -> StereoRig:
             size = (int(fs.getNode(w).real()), int(fs.getNode(h).real()))
     fisheye = not fs.getNode("fisheye").empty() and bool(fs.getNode("fisheye").real())
     fs.release()
-    cams = [CameraModel(_numbers(path, K, 9, name).reshape(3, 3), _numbers(path, D, None, f"D{i}"), size, fisheye)
-            for i, (name, K, D) in enumerate((("K1", K1, D1), ("K2", K2, D2)), start=1)]  # fmt: skip
+    cams = [
+        CameraModel(_numbers(path, K, 9, name).reshape(3, 3), _numbers(path, D, None, f"D{i}"), size, fisheye)
+        for i, (name, K, D) in enumerate((("K1", K1, D1), ("K2", K2, D2)), start=1)
+    ]
     return StereoRig(cams[0], cams[1], _numbers(path, R, 9, "R").reshape(3, 3), _numbers(path, T, 3, "T"), path)
 
 

@@ -23,9 +23,18 @@ class Rectifier:
         T = rig.T.reshape(3, 1)
         if left.fisheye:
             R1, R2, P1, P2, _ = cv2.fisheye.stereoRectify(
-                left.K, left.D, right.K, right.D, input_size, rig.R, T, cv2.CALIB_ZERO_DISPARITY,
-                newImageSize=output_size, balance=alpha, fov_scale=1.0,
-            )  # fmt: skip
+                left.K,
+                left.D,
+                right.K,
+                right.D,
+                input_size,
+                rig.R,
+                T,
+                cv2.CALIB_ZERO_DISPARITY,
+                newImageSize=output_size,
+                balance=alpha,
+                fov_scale=1.0,
+            )
             undistort = cv2.fisheye.initUndistortRectifyMap
         else:
             R1, R2, P1, P2, *_ = cv2.stereoRectify(
@@ -83,9 +92,10 @@ def epipolar_error(left: np.ndarray, right: np.ndarray, max_disparity_px: float)
     good = (
         (status.ravel() == 1)
         & (np.abs(refined - pr).reshape(-1, 2).max(axis=1) < 2.0)  # LK stayed on the ORB match
-        & (disparity[:, 0] >= -1.0) & (disparity[:, 0] <= max_disparity_px)
+        & (disparity[:, 0] >= -1.0)
+        & (disparity[:, 0] <= max_disparity_px)
         & (np.abs(disparity[:, 1]) < 8.0)  # a far-off row is a false match
-    )  # fmt: skip
+    )
     if good.sum() < 20:
         return None
     return EpipolarCheck(float(np.median(np.abs(disparity[good, 1]))), int(good.sum()))

@@ -105,9 +105,14 @@ class BagSource:
         return {
             "source": self.path.name,
             "topics": self.names | ({"odometry": self.c.topics.odometry} if self.c.topics.odometry else {}),
-            "sync": {"left_messages": self.stats.left, "right_messages": self.stats.right, "pairs": self.stats.pairs,
-                     "unpaired": self.stats.unpaired, "worst_gap_ms": round(self.stats.worst_gap_s * 1000, 3)},
-        }  # fmt: skip
+            "sync": {
+                "left_messages": self.stats.left,
+                "right_messages": self.stats.right,
+                "pairs": self.stats.pairs,
+                "unpaired": self.stats.unpaired,
+                "worst_gap_ms": round(self.stats.worst_gap_s * 1000, 3),
+            },
+        }
 
     def close(self) -> None:
         self.bag.__exit__()
@@ -157,8 +162,11 @@ class VideoSource:
             log.warning(
                 "%s: the time offset %d frames is ambiguous (correlation %.3f, another offset %.3f); "
                 "check preview.jpg or give ingest.videos.offset_frames",
-                self.path, offset.frames, offset.correlation, offset.runner_up,
-            )  # fmt: skip
+                self.path,
+                offset.frames,
+                offset.correlation,
+                offset.runner_up,
+            )
         log.info("video offset: right frame = left frame %+d (motion correlation %.3f)", offset.frames, offset.correlation)
         return offset.frames, offset.correlation
 

@@ -67,12 +67,15 @@ def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) ->
         "frames": len(times),
         "start_stamp_s": float(times[0]),
         "fps": (len(times) - 1) / float(times[-1] - times[0]) if times[-1] > times[0] else None,
-        "width": c.width, "height": c.height, "alpha": c.alpha,
-        "baseline_m": calibration.baseline_m, "fx": calibration.fx,
+        "width": c.width,
+        "height": c.height,
+        "alpha": c.alpha,
+        "baseline_m": calibration.baseline_m,
+        "fx": calibration.fx,
         "raw_size": list(source.input_size),
         "rectified_pitch_change_deg": rectifier.pitch_change_deg,
         "epipolar_error_px": check,
-    } | _footprint(c, rectifier)  # fmt: skip
+    } | _footprint(c, rectifier)
     (out / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
     _preview(out, len(times))
     return meta
@@ -106,8 +109,9 @@ def _epipolar(out: Path, count: int, c: DictConfig) -> float | None:
         log.warning(
             "RECTIFICATION IS POOR: matched features lie %.2f px apart vertically (median; limit ingest.max_epipolar_px = %g). "
             "The calibration does not fit this recording; stereo depth and visual odometry will be wrong. See preview.jpg.",
-            error, c.max_epipolar_px,
-        )  # fmt: skip
+            error,
+            c.max_epipolar_px,
+        )
     return error
 
 

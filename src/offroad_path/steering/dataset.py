@@ -33,8 +33,14 @@ class SteeringDataset(Dataset):
     (steering.cache_mb): at PilotNet's 256 x 136 a frame is 104 KB, and decoding its 512 x 288 PNG
     every epoch took a quarter of the epoch."""
 
-    def __init__(self, frames: list[SteeringFrame], size: tuple[int, int], transform: A.Compose,
-                 loss_weights: np.ndarray | None = None, cache_mb: float = 0):  # fmt: skip
+    def __init__(
+        self,
+        frames: list[SteeringFrame],
+        size: tuple[int, int],
+        transform: A.Compose,
+        loss_weights: np.ndarray | None = None,
+        cache_mb: float = 0,
+    ):
         self.frames = frames
         self.size = size  # (width, height)
         self.transform = transform

@@ -34,11 +34,14 @@ def error_by_magnitude(true: np.ndarray, predicted: np.ndarray, edges: tuple[flo
     magnitude = np.abs(true)
     for lo, hi in itertools.pairwise(edges):
         inside = (magnitude >= lo) & ((magnitude < hi) | (hi == edges[-1]))
-        rows.append({
-            "true_magnitude": f"{lo:.1f}-{hi:.1f}", "frames": int(inside.sum()),
-            "mean_absolute_error": float(np.abs(predicted - true)[inside].mean()) if inside.any() else None,
-            "mean_predicted_magnitude": float(np.abs(predicted)[inside].mean()) if inside.any() else None,
-        })  # fmt: skip
+        rows.append(
+            {
+                "true_magnitude": f"{lo:.1f}-{hi:.1f}",
+                "frames": int(inside.sum()),
+                "mean_absolute_error": float(np.abs(predicted - true)[inside].mean()) if inside.any() else None,
+                "mean_predicted_magnitude": float(np.abs(predicted)[inside].mean()) if inside.any() else None,
+            }
+        )
     return rows
 
 
@@ -52,8 +55,13 @@ def scatter_plot(true: np.ndarray, predicted: np.ndarray, path: Path) -> None:
     ax.scatter(true, predicted, s=6, alpha=0.5)
     ax.plot([-1, 1], [-1, 1], color="grey", lw=0.8, label="perfect")
     ax.axhspan(-0.5, 0.5, color="orange", alpha=0.08, label="|prediction| <= 0.5")
-    ax.set(xlim=(-1, 1), ylim=(-1, 1), xlabel="true normalised steering", ylabel="predicted",
-           title=f"PilotNet, {len(true)} test frames, MAE {np.abs(predicted - true).mean():.3f}")  # fmt: skip
+    ax.set(
+        xlim=(-1, 1),
+        ylim=(-1, 1),
+        xlabel="true normalised steering",
+        ylabel="predicted",
+        title=f"PilotNet, {len(true)} test frames, MAE {np.abs(predicted - true).mean():.3f}",
+    )
     ax.legend(loc="upper left", fontsize=7)
     fig.tight_layout()
     fig.savefig(path)

@@ -30,8 +30,15 @@ class SteeringFrame:
     mirrored: bool = False
 
 
-def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: float, mirror: bool,  # noqa: PLR0913
-                   *, steering: dict[str, np.ndarray] | None = None) -> dict[str, list[SteeringFrame]]:  # fmt: skip
+def steering_split(  # noqa: PLR0913
+    labels_dir: Path,
+    split_dir: Path,
+    block_m: float,
+    guard_m: float,
+    mirror: bool,
+    *,
+    steering: dict[str, np.ndarray] | None = None,
+) -> dict[str, list[SteeringFrame]]:
     """{'train', 'val', 'test'}: frames of every labelled sequence that has steering.txt (or, with
     `steering`, an angle per frame by sequence name in place of steering.txt's)."""
     runs = read_label_run(labels_dir)
@@ -64,6 +71,10 @@ def steering_split(labels_dir: Path, split_dir: Path, block_m: float, guard_m: f
         log.warning("no steering.txt in %d sequence(s), left out of the steering baseline: %s", len(skipped), ", ".join(skipped))
     if not parts["train"] or not parts["test"]:
         raise ValueError(f"{labels_dir}: no sequence with steering.txt gives both training and test frames")
-    log.info("steering frames: %s (mirrored copies included: %s), %d training frames left out beside held-out ones",
-             {p: len(f) for p, f in parts.items()}, mirror, guarded)  # fmt: skip
+    log.info(
+        "steering frames: %s (mirrored copies included: %s), %d training frames left out beside held-out ones",
+        {p: len(f) for p, f in parts.items()},
+        mirror,
+        guarded,
+    )
     return parts

@@ -59,8 +59,11 @@ def fit_steering(cfg: DictConfig) -> dict:
     data = SteeringDataModule(parts, s, cfg.seed)
     task = SteeringTask.from_config(s)
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")
-    settings = {"block_m": cfg.split.block_m, "guard_m": cfg.split.guard_m,
-                "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs}}  # fmt: skip
+    settings = {
+        "block_m": cfg.split.block_m,
+        "guard_m": cfg.split.guard_m,
+        "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs},
+    }
     if s.slip:
         settings["slip"] = OmegaConf.to_container(cfg.world.slip)
     files = [Path(s.split_dir) / f"{part}.csv" for part in PARTS] + [Path(s.labels_dir) / "summary.json"]
@@ -82,9 +85,15 @@ def fit_steering(cfg: DictConfig) -> dict:
         scatter_plot(true, predicted, tmp / "scatter.png")
         return {**steering_metrics(true, predicted, s.lock_deg, s.steering_ratio), "by_true_magnitude": bins}
 
-    spec = RunSpec(stage="train_steering", out_dir=Path(s.out_dir), out_key="steering.out_dir",
-                   key=run_identity(cfg, "train_steering", settings, files), max_epochs=s.max_epochs, patience=s.patience,
-                   write_more=write_predictions)  # fmt: skip
+    spec = RunSpec(
+        stage="train_steering",
+        out_dir=Path(s.out_dir),
+        out_key="steering.out_dir",
+        key=run_identity(cfg, "train_steering", settings, files),
+        max_epochs=s.max_epochs,
+        patience=s.patience,
+        write_more=write_predictions,
+    )
     tags = {"stage": "train_steering", "model": "pilotnet", "slip": str(s.slip).lower()}
     logger = training_logger(cfg, "train_steering pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
     results = fit(cfg, task, data, spec, logger)
@@ -101,7 +110,10 @@ def fit_steering(cfg: DictConfig) -> dict:
     log.info(
         "PilotNet: test mean absolute error %.4f (%.1f degrees at the steering wheel; straight ahead would score %.4f), "
         "largest predicted magnitude %.3f of true %.3f",
-        metrics["mean_absolute_error"], metrics["mean_absolute_error_steering_wheel_deg"], metrics["straight_ahead_mean_absolute_error"],
-        metrics["largest_predicted_magnitude"], metrics["largest_true_magnitude"],
-    )  # fmt: skip
+        metrics["mean_absolute_error"],
+        metrics["mean_absolute_error_steering_wheel_deg"],
+        metrics["straight_ahead_mean_absolute_error"],
+        metrics["largest_predicted_magnitude"],
+        metrics["largest_true_magnitude"],
+    )
     return metrics

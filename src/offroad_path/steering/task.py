@@ -21,8 +21,17 @@ class SteeringTask(BaseTask):
     monitor, mode = "val/mae", "min"
 
     # Hyper-parameters saved flat in the checkpoint; build one from config with from_config.
-    def __init__(self, *, width: int, height: int, lr: float, lr_step_epochs: int, lr_gamma: float,  # noqa: PLR0913
-                 momentum: float, weight_decay: float):  # fmt: skip
+    def __init__(  # noqa: PLR0913
+        self,
+        *,
+        width: int,
+        height: int,
+        lr: float,
+        lr_step_epochs: int,
+        lr_gamma: float,
+        momentum: float,
+        weight_decay: float,
+    ):
         super().__init__()
         self.save_hyperparameters()
         self.configure()

@@ -106,8 +106,13 @@ def run_identity(cfg: DictConfig, stage: str, settings: dict, files: list[Path])
     of `files` and of this package's code (so new data, a new pretraining or a code change never
     resumes an old run, even one that finished). Paths are taken as configured, never resolved."""
     trainer = {k: v for k, v in OmegaConf.to_container(cfg.trainer, resolve=True).items() if k not in LENGTH_SETTINGS}
-    identity = {"stage": stage, "seed": cfg.seed, **settings, "trainer": trainer,
-                "callbacks": OmegaConf.to_container(cfg.callbacks, resolve=True)}  # fmt: skip
+    identity = {
+        "stage": stage,
+        "seed": cfg.seed,
+        **settings,
+        "trainer": trainer,
+        "callbacks": OmegaConf.to_container(cfg.callbacks, resolve=True),
+    }
     digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode())
     return file_digest(files + sorted(PACKAGE.rglob("*.py")), digest).hexdigest()[:16]
 
@@ -167,17 +172,30 @@ def fit(
         best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
         checkpoints.insert(0, best)
     else:
-        log.info("no validation set: training runs to its end (max_steps %d, max_epochs %d) and keeps the last weights",
-                 spec.max_steps, spec.max_epochs)  # fmt: skip
+        log.info(
+            "no validation set: training runs to its end (max_steps %d, max_epochs %d) and keeps the last weights",
+            spec.max_steps,
+            spec.max_epochs,
+        )
         without_validation = {"limit_val_batches": 0, "num_sanity_val_steps": 0}
     trainer: L.Trainer = instantiate(
-        cfg.trainer, max_epochs=spec.max_epochs, max_steps=spec.max_steps, logger=logger if logger is not None else False,
-        default_root_dir=work, **without_validation,
-        callbacks=[*checkpoints, *configured_callbacks(cfg.callbacks, task, spec.validate, spec.patience), SeedEachEpoch(cfg.seed),
-                   StayStopped(), StampConfig(key),
-                   *spec.extra_callbacks],
-        plugins=[AtomicCheckpointIO()], enable_progress_bar=False,
-    )  # fmt: skip
+        cfg.trainer,
+        max_epochs=spec.max_epochs,
+        max_steps=spec.max_steps,
+        logger=logger if logger is not None else False,
+        default_root_dir=work,
+        **without_validation,
+        callbacks=[
+            *checkpoints,
+            *configured_callbacks(cfg.callbacks, task, spec.validate, spec.patience),
+            SeedEachEpoch(cfg.seed),
+            StayStopped(),
+            StampConfig(key),
+            *spec.extra_callbacks,
+        ],
+        plugins=[AtomicCheckpointIO()],
+        enable_progress_bar=False,
+    )
     trainer.fit(task, data, ckpt_path=resume, weights_only=True)
     best_score = None
     if spec.validate and best.best_model_path:
@@ -188,8 +206,12 @@ def fit(
         # Another rank of a DDP run has done its part: rank 0 writes the outputs (and the stage's
         # code after fit runs there only).
         raise SystemExit(0)
-    metrics = {f"best_{task.monitor.replace('/', '_')}": best_score,
-               "epochs": trainer.current_epoch, "global_step": trainer.global_step, **{k: float(v) for k, v in tested.items()}}  # fmt: skip
+    metrics = {
+        f"best_{task.monitor.replace('/', '_')}": best_score,
+        "epochs": trainer.current_epoch,
+        "global_step": trainer.global_step,
+        **{k: float(v) for k, v in tested.items()},
+    }
     with atomic_directory(spec.out_dir, spec.stage, key=spec.out_key) as tmp:
         extra = {"datamodule_hyper_parameters": dict(data.hparams)} if data.hparams else {}
         save_weights(tmp / "checkpoints" / "best.ckpt", task, **extra, **{CONFIG_HASH: key})
@@ -228,13 +250,23 @@ def fit_segmentation(
     if pretraining_name != "none":
         files.append(Path(pretraining.checkpoint or pretraining.weights_path or ""))
     settings = {
-        "target": target, "channels_last": own.channels_last, "model": OmegaConf.to_container(m, resolve=True),
+        "target": target,
+        "channels_last": own.channels_last,
+        "model": OmegaConf.to_container(m, resolve=True),
         "data": {k: v for k, v in OmegaConf.to_container(cfg.data, resolve=True).items() if k not in LOADER_SETTINGS},
         "pretraining": OmegaConf.to_container(pretraining, resolve=True) if pretraining is not None else None,
-    }  # fmt: skip
-    spec = RunSpec(stage=stage, out_dir=out_dir, out_key=f"{stage}.out_dir", key=run_identity(cfg, stage, settings, files),
-                   max_epochs=own.get("max_epochs") or cfg.trainer.max_epochs, max_steps=own.max_steps,
-                   validate=bool(data.samples["val"]), extra_callbacks=(LogSamples(own.sample_images),), write_more=write_more)  # fmt: skip
+    }
+    spec = RunSpec(
+        stage=stage,
+        out_dir=out_dir,
+        out_key=f"{stage}.out_dir",
+        key=run_identity(cfg, stage, settings, files),
+        max_epochs=own.get("max_epochs") or cfg.trainer.max_epochs,
+        max_steps=own.max_steps,
+        validate=bool(data.samples["val"]),
+        extra_callbacks=(LogSamples(own.sample_images),),
+        write_more=write_more,
+    )
     tags = {"stage": stage, "model": m.name, "pretraining": pretraining_name}
     logger = training_logger(cfg, f"{stage} {m.name}-{pretraining_name}", tags, OmegaConf.to_container(cfg, resolve=True))
     return fit(cfg, task, data, spec, logger)

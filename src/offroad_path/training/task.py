@@ -104,8 +104,9 @@ class SegmentationTask(BaseTask):
         """From a `model` config node (conf/model/<name>.yaml)."""
         optimiser = {k: model[k] for k in ("lr", "lr_gamma", "lr_warmup", "momentum", "weight_decay")}
         milestones = [float(f) for f in model.lr_milestones]
-        return cls(model=model.name, num_classes=num_classes, width=model.width, lr_milestones=milestones, **optimiser,
-                   channels_last=channels_last)  # fmt: skip
+        return cls(
+            model=model.name, num_classes=num_classes, width=model.width, lr_milestones=milestones, **optimiser, channels_last=channels_last
+        )
 
     @classmethod
     def for_inference(cls, hp: dict) -> SegmentationTask:

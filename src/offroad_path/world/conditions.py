@@ -49,8 +49,16 @@ def frame_conditions(world: World, cfg: WorldConfig, distance_m: float = 20.0, n
         mean_curvature = float(np.mean(np.abs(curvature)))
         radius = min(1.0 / mean_curvature, STRAIGHT_RADIUS_M) if mean_curvature > 0 else STRAIGHT_RADIUS_M
         fork = _in_view(fork_points, world.poses[k], tan_half_fov) if len(fork_points) else False
-        rows.append({"frame": k, "shadow": round(float(np.mean(lit < 0.5)), 4), "water": water, "fork": fork, "surface": surface,
-                     "bend_radius_m": round(radius, 2)})  # fmt: skip
+        rows.append(
+            {
+                "frame": k,
+                "shadow": round(float(np.mean(lit < 0.5)), 4),
+                "water": water,
+                "fork": fork,
+                "surface": surface,
+                "bend_radius_m": round(radius, 2),
+            }
+        )
     return rows
 
 

@@ -83,8 +83,10 @@ def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: i
                 log.info("test worlds: kept %d of %d drawn, %d blocks", len(chosen), world.index + 1, sum(w.blocks for w in chosen))
                 return chosen
     missing = _lacks(chosen, shown, c)
-    raise ValueError(f"synthesize.test_worlds: {c.max_candidates} candidate worlds do not make the test set ({missing}); "
-                     "raise max_candidates or lower min_blocks or per_condition")  # fmt: skip
+    raise ValueError(
+        f"synthesize.test_worlds: {c.max_candidates} candidate worlds do not make the test set ({missing}); "
+        "raise max_candidates or lower min_blocks or per_condition"
+    )
 
 
 def _lacks(chosen: list[HeldOutWorld], shown: dict[str, int], c: TestWorldsConfig) -> str:

@@ -137,8 +137,10 @@ def rebuild_world(cfg: WorldConfig, folder: Path) -> World:
     meta = json.loads((folder / "meta.json").read_text())
     world = build_world(cfg, int(meta["seed"]))
     if not math.isclose(path_length(world.poses), float(meta["distance_m"]), rel_tol=1e-9):
-        raise ValueError(f"{folder}: rendered with another world config than this one (its drive is {meta['distance_m']:.3f} m, "
-                         f"this config's {path_length(world.poses):.3f} m); rerun synthesize")  # fmt: skip
+        raise ValueError(
+            f"{folder}: rendered with another world config than this one (its drive is {meta['distance_m']:.3f} m, "
+            f"this config's {path_length(world.poses):.3f} m); rerun synthesize"
+        )
     return world
 
 
