@@ -27,9 +27,9 @@ log = logging.getLogger("offroad_path.drive")
 
 
 def outputs(cfg: DictConfig) -> Outputs:
-    d = cfg.drive
-    inputs = [d.synthetic_dir, d.runs_dir, *d.pilotnets.values()]
-    return Outputs("drive", folders={"drive.out_dir": d.out_dir}, files={"drive.metrics_path": d.metrics_path}, inputs=inputs)
+    drive = cfg.drive
+    inputs = [drive.synthetic_dir, drive.runs_dir, *drive.pilotnets.values()]
+    return Outputs("drive", folders={"drive.out_dir": drive.out_dir}, files={"drive.metrics_path": drive.metrics_path}, inputs=inputs)
 
 
 def check_policies(d: DictConfig, seed: int) -> None:
@@ -60,29 +60,30 @@ def run_drive(cfg: DictConfig) -> dict:
     from offroad_path.driving.report import ARGUMENTS, report
     from offroad_path.driving.worlds import WorldJob, drive_params, drive_world, test_worlds
 
-    d = cfg.drive
-    check_policies(d, cfg.seed)
-    worlds = test_worlds(Path(d.synthetic_dir), d.worlds)
-    if len(worlds) * d.starts_per_world < 2:
+    drive = cfg.drive
+    check_policies(drive, cfg.seed)
+    worlds = test_worlds(Path(drive.synthetic_dir), drive.worlds)
+    if len(worlds) * drive.starts_per_world < 2:
         raise ValueError(
-            f"drive.starts_per_world: {len(worlds)} test world(s) x {d.starts_per_world} start(s) is one drive; "
+            f"drive.starts_per_world: {len(worlds)} test world(s) x {drive.starts_per_world} start(s) is one drive; "
             "intervals need at least 2 (more starts, or more test worlds)"
         )
-    params = drive_params(cfg.postprocess, d.width, cfg.world.width)
+    params = drive_params(cfg.postprocess, drive.width, cfg.world.width)
     started = time.perf_counter()
-    with atomic_directory(d.out_dir, "drive", key="drive.out_dir") as tmp:
+    with atomic_directory(drive.out_dir, "drive", key="drive.out_dir") as tmp:
         jobs = [
-            WorldJob(w, cfg.world, d, cfg.seed, params, cfg.label.disparity, str(tmp), d.video and i == 0) for i, w in enumerate(worlds)
+            WorldJob(w, cfg.world, drive, cfg.seed, params, cfg.label.disparity, str(tmp), drive.video and i == 0)
+            for i, w in enumerate(worlds)
         ]
-        results = map_processes(drive_world, jobs, d.workers, [f"test world {w.folder}" for w in worlds])
-        logs: dict[str, dict[str, list[DriveLog]]] = {argument: {} for argument in d.arguments}
+        results = map_processes(drive_world, jobs, drive.workers, [f"test world {w.folder}" for w in worlds])
+        logs: dict[str, dict[str, list[DriveLog]]] = {argument: {} for argument in drive.arguments}
         for per_world in results:
             for argument, g in per_world:
                 logs[argument].setdefault(g.policy, []).append(g)
-        markdown, metrics = report(logs, d, [w.name for w in worlds])
+        markdown, metrics = report(logs, drive, [w.name for w in worlds])
         (tmp / "results.md").write_text(markdown)
         (tmp / "drive.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    write_text_atomic(d.metrics_path, json.dumps(metrics, indent=2) + "\n", "drive")
+    write_text_atomic(drive.metrics_path, json.dumps(metrics, indent=2) + "\n", "drive")
     log.info(
         "drove %d test worlds in %.0f s; %s",
         len(worlds),

@@ -34,18 +34,18 @@ log = logging.getLogger("offroad_path.evaluate")
 def outputs(cfg: DictConfig) -> Outputs:
     """The evaluate stage's outputs and every input: the runs, their post-processed maps, the label
     runs, the split and the recordings behind it, PilotNet's predictions."""
-    e = cfg.evaluate
+    evaluate_cfg = cfg.evaluate
     inputs = [
-        e.runs_dir,
-        e.postprocessed_dir,
-        e.labels_dir,
-        Path(e.train_manifest).parent,
-        *manifest_folders(e.train_manifest),
-        e.steering_from_paths.pilotnet_predictions,
-        *(label_run_folders(e.real_labels_dir) if e.real_labels_dir else []),
+        evaluate_cfg.runs_dir,
+        evaluate_cfg.postprocessed_dir,
+        evaluate_cfg.labels_dir,
+        Path(evaluate_cfg.train_manifest).parent,
+        *manifest_folders(evaluate_cfg.train_manifest),
+        evaluate_cfg.steering_from_paths.pilotnet_predictions,
+        *(label_run_folders(evaluate_cfg.real_labels_dir) if evaluate_cfg.real_labels_dir else []),
     ]
-    folders = {"evaluate.out_dir": e.out_dir, "evaluate.plots_dir": e.plots_dir}
-    return Outputs("evaluate", folders=folders, files={"evaluate.metrics_path": e.metrics_path}, inputs=inputs)
+    folders = {"evaluate.out_dir": evaluate_cfg.out_dir, "evaluate.plots_dir": evaluate_cfg.plots_dir}
+    return Outputs("evaluate", folders=folders, files={"evaluate.metrics_path": evaluate_cfg.metrics_path}, inputs=inputs)
 
 
 @reads("evaluate", "label", "split", "mlflow", writes=outputs)
@@ -55,23 +55,23 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
     from offroad_path.evaluation.sections import Baselines, ByCondition, RealFootage, ResultsTable, SteeringFromPaths, Temporal
     from offroad_path.evaluation.uncertainty import Uncertainty, test_bootstrap
 
-    e = cfg.evaluate
-    test = TestSet.read(e)
+    evaluate_cfg = cfg.evaluate
+    test = TestSet.read(evaluate_cfg)
     results = ResultsTable()
-    bootstrap = test_bootstrap(e, test.samples, cfg.split.block_m)
+    bootstrap = test_bootstrap(evaluate_cfg, test.samples, cfg.split.block_m)
     # The report, section by section, in the order of results.md and metrics.json.
     sections: list[Section] = [
         results,
         Uncertainty(bootstrap, cfg.split.block_m),
         Baselines(),
-        SteeringFromPaths(e, bootstrap),
+        SteeringFromPaths(evaluate_cfg, bootstrap),
         ByCondition(bootstrap),
-        Temporal(e, cfg.label, cfg.split.block_m),
-        RealFootage(e, bootstrap, cfg.split.block_m, cfg.label.distance_m),
+        Temporal(evaluate_cfg, cfg.label, cfg.split.block_m),
+        RealFootage(evaluate_cfg, bootstrap, cfg.split.block_m, cfg.label.distance_m),
     ]
     for section in sections:
         section.score(test)
-    write_report(e, test, sections, results.table(), results.figures(test, e.figure_cases, e.figure_scale))
+    write_report(evaluate_cfg, test, sections, results.table(), results.figures(test, evaluate_cfg.figure_cases, evaluate_cfg.figure_scale))
     log_to_mlflow(cfg, sections, results.table())
     return results.table()
 

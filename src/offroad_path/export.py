@@ -32,25 +32,25 @@ def run_export(cfg: DictConfig) -> float:
     from offroad_path.inference.export import export_onnx  # torch: after the config is checked
     from offroad_path.inference.runners import TorchModel
 
-    e = cfg.export
-    out = Path(e.out)
+    export = cfg.export
+    out = Path(export.out)
     if out.suffix != ".onnx":
         raise UnsafeOutputError(f"export.out={out}: must be a .onnx file path; nothing is written")
-    model = TorchModel(e.checkpoint)
+    model = TorchModel(export.checkpoint)
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.tmp-", suffix=".onnx", dir=out.parent)
     os.close(fd)
     try:
-        difference = export_onnx(model.task.model, model.width, model.height, Path(tmp), e.opset)
-        if difference > e.tolerance:
-            raise ValueError(f"{e.checkpoint}: the ONNX export differs from PyTorch by {difference:.2e} (> {e.tolerance:g})")
+        difference = export_onnx(model.task.model, model.width, model.height, Path(tmp), export.opset)
+        if difference > export.tolerance:
+            raise ValueError(f"{export.checkpoint}: the ONNX export differs from PyTorch by {difference:.2e} (> {export.tolerance:g})")
         write_text_atomic(sidecar(out), "export\n")
         os.replace(tmp, out)
     finally:
         Path(tmp).unlink(missing_ok=True)
     log.info(
         "exported %s to %s (%d x %d input, dynamic batch); largest difference from PyTorch %.2e",
-        e.checkpoint,
+        export.checkpoint,
         out,
         model.width,
         model.height,

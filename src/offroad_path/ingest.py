@@ -36,33 +36,33 @@ def list_topics(bag: str) -> list[str]:
 
 
 def outputs(cfg: DictConfig) -> Outputs:
-    c = cfg.ingest
-    inputs = (c.bag, c.videos.left, c.videos.right, c.calibration, c.right_calibration)
-    return Outputs("ingest", folders={} if c.list_topics else {"ingest.out_dir": c.out_dir}, inputs=inputs)
+    ingest_cfg = cfg.ingest
+    inputs = (ingest_cfg.bag, ingest_cfg.videos.left, ingest_cfg.videos.right, ingest_cfg.calibration, ingest_cfg.right_calibration)
+    return Outputs("ingest", folders={} if ingest_cfg.list_topics else {"ingest.out_dir": ingest_cfg.out_dir}, inputs=inputs)
 
 
 @reads("ingest", writes=outputs)
 def ingest(cfg: DictConfig) -> dict:
-    c = cfg.ingest
-    if c.list_topics:
-        if c.bag is None:
+    ingest_cfg = cfg.ingest
+    if ingest_cfg.list_topics:
+        if ingest_cfg.bag is None:
             raise ValueError("ingest.list_topics needs ingest.bag=PATH")
-        for line in list_topics(c.bag):
+        for line in list_topics(ingest_cfg.bag):
             print(line)
         return {}
-    out_dir = Path(c.out_dir)
-    source = open_source(c)
+    out_dir = Path(ingest_cfg.out_dir)
+    source = open_source(ingest_cfg)
     try:
         with atomic_directory(out_dir, "ingest", key="ingest.out_dir") as tmp:
-            meta = write_sequence(source, c, tmp)
+            meta = write_sequence(source, ingest_cfg, tmp)
     finally:
         source.close()
     epipolar = "not measurable" if meta["epipolar_error_px"] is None else f"{meta['epipolar_error_px']:.2f} px"
     log.info(
         "wrote %d rectified stereo pairs %dx%d (baseline %.3f m, fx %.1f px, epipolar error %s)%s to %s",
         meta["frames"],
-        c.width,
-        c.height,
+        ingest_cfg.width,
+        ingest_cfg.height,
         meta["baseline_m"],
         meta["fx"],
         epipolar,

@@ -103,9 +103,9 @@ def sharded(cfg: DictConfig) -> bool:
 
 
 def outputs(cfg: DictConfig) -> Outputs:
-    c = cfg.label
-    files = {} if sharded(cfg) else {"label.metrics_path": c.metrics_path}  # a shard's metrics stay in its folder
-    return Outputs("label", folders={"label.out_dir": c.out_dir}, files=files, inputs=[c.in_dir, c.merge_from])
+    label_cfg = cfg.label
+    files = {} if sharded(cfg) else {"label.metrics_path": label_cfg.metrics_path}  # a shard's metrics stay in its folder
+    return Outputs("label", folders={"label.out_dir": label_cfg.out_dir}, files=files, inputs=[label_cfg.in_dir, label_cfg.merge_from])
 
 
 @reads("label", "mlflow", writes=outputs)

@@ -30,17 +30,17 @@ BATCH = 64  # maps in memory at once
 
 
 def outputs(cfg: DictConfig) -> Outputs:
-    c = cfg.postprocess
-    inputs = [c.predictions_dir, *manifest_folders(Path(c.predictions_dir) / "manifest.csv")]
-    return Outputs("postprocess", folders={"postprocess.out_dir": c.out_dir}, inputs=inputs)
+    postprocess_cfg = cfg.postprocess
+    inputs = [postprocess_cfg.predictions_dir, *manifest_folders(Path(postprocess_cfg.predictions_dir) / "manifest.csv")]
+    return Outputs("postprocess", folders={"postprocess.out_dir": postprocess_cfg.out_dir}, inputs=inputs)
 
 
 @reads("postprocess", writes=outputs)
 def run_postprocess(cfg: DictConfig) -> int:
-    c = cfg.postprocess
-    params = PostprocessParams.from_config(c)
-    out_dir = Path(c.out_dir)
-    rows = read_predictions_manifest(Path(c.predictions_dir) / "manifest.csv")
+    postprocess_cfg = cfg.postprocess
+    params = PostprocessParams.from_config(postprocess_cfg)
+    out_dir = Path(postprocess_cfg.out_dir)
+    rows = read_predictions_manifest(Path(postprocess_cfg.predictions_dir) / "manifest.csv")
     written, seconds = [], 0.0
     with atomic_directory(out_dir, "postprocess", key="postprocess.out_dir") as tmp:
         for start in range(0, len(rows), BATCH):
@@ -61,7 +61,7 @@ def run_postprocess(cfg: DictConfig) -> int:
     log.info(
         "post-processed %d maps of %s into %s (%.2f ms per map)",
         len(written),
-        c.predictions_dir,
+        postprocess_cfg.predictions_dir,
         out_dir,
         1000 * seconds / max(len(written), 1),
     )

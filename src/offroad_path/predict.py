@@ -54,8 +54,8 @@ def write_frame(tmp: Path, name: str, confidence: np.ndarray, shown: np.ndarray,
 
 
 def outputs(cfg: DictConfig) -> Outputs:
-    p = cfg.predict
-    return Outputs("predict", folders={"predict.out_dir": p.out_dir}, inputs=[p.input, p.checkpoint])
+    predict = cfg.predict
+    return Outputs("predict", folders={"predict.out_dir": predict.out_dir}, inputs=[predict.input, predict.checkpoint])
 
 
 def ground_camera(cfg: DictConfig, source: FrameSource) -> GroundCamera:

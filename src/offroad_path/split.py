@@ -62,31 +62,31 @@ def outputs(cfg: DictConfig) -> Outputs:
 
 @reads("split", writes=outputs)
 def split(cfg: DictConfig) -> dict:
-    c = cfg.split
-    frames, samples = labelled_frames(Path(c.labels_dir))
+    split_cfg = cfg.split
+    frames, samples = labelled_frames(Path(split_cfg.labels_dir))
     if not frames:
-        raise ValueError(f"{c.labels_dir}: holds no labels to split")
-    parts, guarded = split_frames(frames, c)
+        raise ValueError(f"{split_cfg.labels_dir}: holds no labels to split")
+    parts, guarded = split_frames(frames, split_cfg)
     counts = {}
-    listed = [c.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
-    with atomic_directory(c.out_dir, "split", key="split.out_dir") as tmp:
+    listed = [split_cfg.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
+    with atomic_directory(split_cfg.out_dir, "split", key="split.out_dir") as tmp:
         for name, part in parts.items():
             rows = []
             for frame in part:
                 sample = samples[(frame.sequence, frame.f0)]
                 rows.append(sample)
-                if c.mirror:
+                if split_cfg.mirror:
                     rows.append(Sample(**{**sample.__dict__, "mirrored": True}))
             write_manifest(tmp / f"{name}.csv", rows)
             counts[name] = len(rows)
         worlds = sorted({f.sequence for f in frames if f.held_out})
-        test_blocks = len({block_of(f.sequence, f.travelled_m, c.block_m) for f in parts["test"]})
+        test_blocks = len({block_of(f.sequence, f.travelled_m, split_cfg.block_m) for f in parts["test"]})
         summary = {
             "frames": len(frames),
             "guarded_out": guarded,
             "samples": counts,
-            "strategy": c.strategy,
-            "mirror": c.mirror,
+            "strategy": split_cfg.strategy,
+            "mirror": split_cfg.mirror,
             "test_worlds": worlds,
             "test_blocks": test_blocks,
             "data_root": data_root(listed),
@@ -96,7 +96,7 @@ def split(cfg: DictConfig) -> dict:
         "split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones; test: %d blocks of driving%s",
         len(frames),
         counts,
-        " (with mirrored copies)" if c.mirror else "",
+        " (with mirrored copies)" if split_cfg.mirror else "",
         guarded,
         test_blocks,
         f" from {len(worlds)} held-out test worlds" if worlds else " from the drives",

@@ -22,10 +22,10 @@ from offroad_path.utils.outputs import Outputs
 
 
 def outputs(cfg: DictConfig) -> Outputs:
-    s = cfg.steering
-    inputs = [*label_run_folders(s.labels_dir), s.split_dir, *manifest_folders(Path(s.split_dir) / "train.csv")]
-    files = {"steering.metrics_path": s.metrics_path, "steering.plots_path": s.plots_path}
-    return Outputs("train_steering", folders={"steering.out_dir": s.out_dir}, files=files, inputs=inputs)
+    steering = cfg.steering
+    inputs = [*label_run_folders(steering.labels_dir), steering.split_dir, *manifest_folders(Path(steering.split_dir) / "train.csv")]
+    files = {"steering.metrics_path": steering.metrics_path, "steering.plots_path": steering.plots_path}
+    return Outputs("train_steering", folders={"steering.out_dir": steering.out_dir}, files=files, inputs=inputs)
 
 
 @reads("steering", "split", "world", "trainer", "callbacks", "logger", "mlflow", writes=outputs)

@@ -142,8 +142,8 @@ def score_temporal(
     interval (evaluate.bootstrap: the filter's and the raw counts on the same resamples of blocks)."""
     from offroad_path.inference.runners import TorchModel
 
-    t = e.temporal
-    if not t.enabled:
+    temporal = e.temporal
+    if not temporal.enabled:
         return None
     blocks = held_out_blocks([s for s in samples if not s.mirrored], Path(e.labels_dir), block_m, label.distance_m)
     if blocks is None:
@@ -160,7 +160,7 @@ def score_temporal(
         raw, fused, steady, steady_fused = [], [], [], []
         for block in blocks:
             confidence = model.predict_all(block.images)
-            smooth = filtered(confidence, block, t.alpha)
+            smooth = filtered(confidence, block, temporal.alpha)
             raw.append(confidence)
             fused.append(smooth)
             steady += stability(confidence > e.threshold, block)

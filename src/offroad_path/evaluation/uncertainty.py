@@ -56,8 +56,10 @@ class BlockBootstrap:
 
 def test_bootstrap(e: DictConfig, samples: list[Sample], block_m: float) -> BlockBootstrap:
     """The block bootstrap of the test samples (evaluate.bootstrap; block_m: the split's)."""
-    b = e.bootstrap
-    return BlockBootstrap(sample_blocks(samples, Path(e.labels_dir), block_m), Resampling(b.resamples, b.seed, b.level))
+    bootstrap = e.bootstrap
+    return BlockBootstrap(
+        sample_blocks(samples, Path(e.labels_dir), block_m), Resampling(bootstrap.resamples, bootstrap.seed, bootstrap.level)
+    )
 
 
 Side = tuple[str, str]  # a run and its post-processing ("no" / "yes")

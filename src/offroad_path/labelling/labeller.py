@@ -98,8 +98,12 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
             reports.append(report)
             continue
         disparity = compute_disparity(matcher, seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
-        o = cfg.occlusion
-        occlusion = Occlusion(measured_depth(seq, f0, disparity, o), o.margin_m, o.margin_rel) if o.enabled else None
+        occlusion_cfg = cfg.occlusion
+        occlusion = (
+            Occlusion(measured_depth(seq, f0, disparity, occlusion_cfg), occlusion_cfg.margin_m, occlusion_cfg.margin_rel)
+            if occlusion_cfg.enabled
+            else None
+        )
         mask = path_mask(footprint_depth(swept_polygons(poses, f0, fn, footprint), K, size), occlusion)
         report.label_pixels = int(np.count_nonzero(mask))
         if report.label_pixels == 0:

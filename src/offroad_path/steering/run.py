@@ -51,22 +51,24 @@ def slippery_steering(cfg: DictConfig) -> dict[str, np.ndarray]:
 def fit_steering(cfg: DictConfig) -> dict:
     """The train_steering stage's run (offroad_path.train_steering): PilotNet on the path split's
     training frames, tested, written to steering.out_dir, steering.metrics_path and steering.plots_path."""
-    s = cfg.steering
+    steering = cfg.steering
     L.seed_everything(cfg.seed, workers=True)
     # The frames follow the path split's blocks of driving, with its guard (conf/split).
-    angles = slippery_steering(cfg) if s.slip else None
-    parts = steering_split(Path(s.labels_dir), Path(s.split_dir), cfg.split.block_m, cfg.split.guard_m, s.mirror, steering=angles)
-    data = SteeringDataModule(parts, s, cfg.seed)
-    task = SteeringTask.from_config(s)
+    angles = slippery_steering(cfg) if steering.slip else None
+    parts = steering_split(
+        Path(steering.labels_dir), Path(steering.split_dir), cfg.split.block_m, cfg.split.guard_m, steering.mirror, steering=angles
+    )
+    data = SteeringDataModule(parts, steering, cfg.seed)
+    task = SteeringTask.from_config(steering)
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")
     settings = {
         "block_m": cfg.split.block_m,
         "guard_m": cfg.split.guard_m,
-        "steering": {k: v for k, v in OmegaConf.to_container(s, resolve=True).items() if k not in outputs},
+        "steering": {k: v for k, v in OmegaConf.to_container(steering, resolve=True).items() if k not in outputs},
     }
-    if s.slip:
+    if steering.slip:
         settings["slip"] = OmegaConf.to_container(cfg.world.slip)
-    files = [Path(s.split_dir) / f"{part}.csv" for part in PARTS] + [Path(s.labels_dir) / "summary.json"]
+    files = [Path(steering.split_dir) / f"{part}.csv" for part in PARTS] + [Path(steering.labels_dir) / "summary.json"]
     scored: dict[str, np.ndarray] = {}
 
     def write_predictions(task: SteeringTask, data: SteeringDataModule, tmp: Path) -> dict:
@@ -83,30 +85,30 @@ def fit_steering(cfg: DictConfig) -> dict:
             writer.writeheader()
             writer.writerows(bins)
         scatter_plot(true, predicted, tmp / "scatter.png")
-        return {**steering_metrics(true, predicted, s.lock_deg, s.steering_ratio), "by_true_magnitude": bins}
+        return {**steering_metrics(true, predicted, steering.lock_deg, steering.steering_ratio), "by_true_magnitude": bins}
 
     spec = RunSpec(
         stage="train_steering",
-        out_dir=Path(s.out_dir),
+        out_dir=Path(steering.out_dir),
         out_key="steering.out_dir",
         key=run_identity(cfg, "train_steering", settings, files),
-        max_epochs=s.max_epochs,
-        patience=s.patience,
+        max_epochs=steering.max_epochs,
+        patience=steering.patience,
         write_more=write_predictions,
     )
-    tags = {"stage": "train_steering", "model": "pilotnet", "slip": str(s.slip).lower()}
+    tags = {"stage": "train_steering", "model": "pilotnet", "slip": str(steering.slip).lower()}
     logger = training_logger(cfg, "train_steering pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
     results = fit(cfg, task, data, spec, logger)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
     true, predicted = scored["true"], scored["predicted"]
-    write_text_atomic(s.metrics_path, json.dumps(metrics, indent=2) + "\n", "train_steering")
+    write_text_atomic(steering.metrics_path, json.dumps(metrics, indent=2) + "\n", "train_steering")
     pairs = "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True))
-    write_text_atomic(s.plots_path, "truth,prediction\n" + pairs, "train_steering")
+    write_text_atomic(steering.plots_path, "truth,prediction\n" + pairs, "train_steering")
     if logger is not None:
         logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
     if isinstance(logger, MLFlowLogger):
         for name in ("scatter.png", "error_by_magnitude.csv"):
-            logger.experiment.log_artifact(logger.run_id, str(Path(s.out_dir) / name))
+            logger.experiment.log_artifact(logger.run_id, str(Path(steering.out_dir) / name))
     log.info(
         "PilotNet: test mean absolute error %.4f (%.1f degrees at the steering wheel; straight ahead would score %.4f), "
         "largest predicted magnitude %.3f of true %.3f",

@@ -76,7 +76,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
     (out_dir / "times.txt").write_text("".join(f"{k / cfg.fps:.6f}\n" for k in range(len(world.poses))))
     (out_dir / "steering.txt").write_text("".join(f"{s:.6f}\n" for s in world.steering))
     (out_dir / "conditions.csv").write_text(conditions_csv(frame_conditions(world, cfg)))
-    v = cfg.vehicle
+    vehicle = cfg.vehicle
     distance = path_length(world.poses)
     meta = {
         "generator": "offroad_path.world",
@@ -88,13 +88,13 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         "width": cfg.width,
         "height": cfg.height,
         "hfov_deg": cfg.hfov_deg,
-        "camera_height_m": v.camera_height_m,
-        "camera_pitch_deg": v.camera_pitch_deg,
-        "vehicle_width_m": v.width_m,
+        "camera_height_m": vehicle.camera_height_m,
+        "camera_pitch_deg": vehicle.camera_pitch_deg,
+        "vehicle_width_m": vehicle.width_m,
         # Footprint extent along the camera's forward axis, relative to the camera centre.
-        "footprint_front_m": v.length_m / 2 - v.camera_forward_m,
-        "footprint_rear_m": -(v.length_m / 2 + v.camera_forward_m),
-        "vehicle": OmegaConf.to_container(v) if OmegaConf.is_config(v) else asdict(v),
+        "footprint_front_m": vehicle.length_m / 2 - vehicle.camera_forward_m,
+        "footprint_rear_m": -(vehicle.length_m / 2 + vehicle.camera_forward_m),
+        "vehicle": OmegaConf.to_container(vehicle) if OmegaConf.is_config(vehicle) else asdict(vehicle),
         "steering": "bicycle-model wheel angle over max_steering_deg, in [-1, 1], positive turns right",
         "depth": "z of the left camera in millimetres (uint16), 0 for sky, 65535 for 65.535 m or farther",
         "classes": list(CLASS_NAMES),

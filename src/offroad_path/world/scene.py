@@ -66,16 +66,16 @@ class World:
 
 
 def vehicle_geometry(cfg: WorldConfig) -> VehicleGeometry:
-    v = cfg.vehicle
+    vehicle = cfg.vehicle
     return VehicleGeometry(
-        wheelbase_m=v.wheelbase_m,
-        track_m=v.track_m,
-        width_m=v.width_m,
-        length_m=v.length_m,
-        camera_height_m=v.camera_height_m,
-        camera_forward_m=v.camera_forward_m,
-        camera_pitch_deg=v.camera_pitch_deg,
-        max_steering_deg=v.max_steering_deg,
+        wheelbase_m=vehicle.wheelbase_m,
+        track_m=vehicle.track_m,
+        width_m=vehicle.width_m,
+        length_m=vehicle.length_m,
+        camera_height_m=vehicle.camera_height_m,
+        camera_forward_m=vehicle.camera_forward_m,
+        camera_pitch_deg=vehicle.camera_pitch_deg,
+        max_steering_deg=vehicle.max_steering_deg,
     )
 
 
