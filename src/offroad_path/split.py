@@ -17,6 +17,7 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import label_run_folders, read_label_run
 from offroad_path.data.manifest import Sample, data_root, write_manifest
 from offroad_path.data.splitting import Frame, block_of, split_frames
+from offroad_path.sequence import meta
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory
 from offroad_path.utils.outputs import Outputs
@@ -30,7 +31,7 @@ def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int]
     frames, samples = [], {}
     for run in read_label_run(labels_dir):
         name, seq, travelled = run.name, run.sequence, run.distance()
-        held_out = held_out_recording(seq.meta, seq.root / "meta.json")
+        held_out = meta.held_out(seq.meta, seq.root / "meta.json")
         for label in run.labels():
             f0 = int(label.stem)
             frames.append(Frame(name, f0, float(travelled[f0]), held_out))
@@ -47,13 +48,6 @@ def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int]
                 seq.calibration.baseline_m,
             )
     return frames, samples
-
-
-def held_out_recording(meta: dict, path: Path) -> bool:
-    """Whether a recording is a held-out test world: meta.json's "split" is "test" (absent: no)."""
-    if meta.get("split", "test") != "test":
-        raise ValueError(f'{path}: "split" is {meta["split"]!r}; the only value it may take is "test" (a held-out test world)')
-    return "split" in meta
 
 
 def outputs(cfg: DictConfig) -> Outputs:

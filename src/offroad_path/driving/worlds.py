@@ -20,6 +20,7 @@ from offroad_path.driving.policies import OraclePolicy, PathPolicy, PilotNetPoli
 from offroad_path.driving.vehicle import Vehicle
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.postprocessing import PostprocessParams
+from offroad_path.sequence import meta
 from offroad_path.world.record import rebuild_world
 from offroad_path.world.render import PinholeCamera
 from offroad_path.world.scene import World, vehicle_geometry
@@ -43,9 +44,9 @@ def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
     """The held-out test worlds (meta.json's "split": "test"), in name order, the first `limit`."""
     found = []
     for meta_path in sorted(synthetic_dir.glob("*/meta.json")):
-        meta = json.loads(meta_path.read_text())
-        if meta.get("split") == "test":
-            found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), int(meta["seed"])))
+        recorded = json.loads(meta_path.read_text())
+        if meta.held_out(recorded, meta_path):
+            found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), int(recorded["seed"])))
     if not found:
         raise ValueError(f'{synthetic_dir}: no held-out test world (a meta.json with "split": "test"); run synthesize')
     return found[:limit] if limit else found

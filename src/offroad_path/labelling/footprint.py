@@ -13,18 +13,11 @@ import cv2
 import numpy as np
 
 from offroad_path.errors import InputError
+from offroad_path.sequence.meta import FOOTPRINT
 from offroad_path.sequence.reader import Sequence
 
 NEAR_M = 0.3
 SUBPIXEL_BITS = 4
-# Config key -> meta.json key for the vehicle footprint.
-FOOTPRINT_META = {
-    "width_m": "vehicle_width_m",
-    "front_m": "footprint_front_m",
-    "rear_m": "footprint_rear_m",
-    "camera_height_m": "camera_height_m",
-    "camera_pitch_deg": "camera_pitch_deg",
-}
 
 
 @dataclass(frozen=True)
@@ -55,7 +48,7 @@ class VehicleFootprint:
 def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
     """The vehicle footprint from config, else from the sequence's meta.json."""
     values, source = {}, {}
-    for key, meta_key in FOOTPRINT_META.items():
+    for key, meta_key in FOOTPRINT.items():
         value, source[key] = cfg.get(key), f"label.footprint.{key}"
         if value is None:
             value, source[key] = seq.meta.get(meta_key, 0.0 if key == "camera_pitch_deg" else None), f"{seq.root / 'meta.json'} {meta_key}"

@@ -15,10 +15,10 @@ from omegaconf import DictConfig
 from offroad_path import __version__
 from offroad_path.errors import InputError
 from offroad_path.geometry.path import path_length
-from offroad_path.labelling.footprint import FOOTPRINT_META
 from offroad_path.recordings.rectify import Rectifier, contact_sheet, epipolar_error
 from offroad_path.recordings.sources import BagSource, VideoSource
 from offroad_path.recordings.sync import Subsampler
+from offroad_path.sequence.meta import FOOTPRINT, GENERATOR, INGESTED
 from offroad_path.sequence.png import FAST_PNG
 from offroad_path.sequence.poses import poses_to_text
 
@@ -56,7 +56,7 @@ def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) ->
     calibration = rectifier.calibration
     (out / "calib.txt").write_text(calibration.to_text())
     (out / "times.txt").write_text("".join(f"{t:.6f}\n" for t in times - times[0]))
-    meta = {"generator": "offroad_path.ingest", "generator_version": __version__} | source.describe()
+    meta = {GENERATOR: INGESTED, "generator_version": __version__} | source.describe()
     camera_poses = source.camera_poses(times)
     if camera_poses is not None:
         poses = rectified_poses(camera_poses, rectifier)
@@ -84,7 +84,7 @@ def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) ->
 def _footprint(c: DictConfig, rectifier: Rectifier) -> dict:
     """The vehicle footprint for meta.json, in the rectified camera: its pitch includes the
     rectifying rotation (the raw camera's pitch when the user gave none)."""
-    values = {meta_key: c.footprint[key] for key, meta_key in FOOTPRINT_META.items() if c.footprint[key] is not None}
+    values = {meta_key: c.footprint[key] for key, meta_key in FOOTPRINT.items() if c.footprint[key] is not None}
     values["camera_pitch_deg"] = float(c.footprint.camera_pitch_deg or 0.0) + rectifier.pitch_change_deg
     return values
 

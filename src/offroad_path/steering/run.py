@@ -15,6 +15,7 @@ from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.data.labels import read_label_run
+from offroad_path.sequence import meta
 from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
 from offroad_path.steering.frames import PARTS, steering_split
@@ -41,7 +42,7 @@ def slippery_steering(cfg: DictConfig) -> dict[str, np.ndarray]:
     from offroad_path.world.record import steering_under_slip  # the world and its renderer, only for this
 
     runs = read_label_run(Path(cfg.steering.labels_dir))
-    folders = [run.sequence.root for run in runs if run.sequence.meta.get("generator") == "offroad_path.world"]
+    folders = [run.sequence.root for run in runs if meta.rendered(run.sequence.meta)]
     if not folders:
         raise ValueError(f"steering.slip: {cfg.steering.labels_dir} labels no rendered sequence, whose world could be driven with slip")
     log.info("steering under slip (world.slip) for %d rendered sequences", len(folders))

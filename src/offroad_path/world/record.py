@@ -16,6 +16,7 @@ from omegaconf import OmegaConf
 from offroad_path import __version__
 from offroad_path.config import WorldConfig
 from offroad_path.geometry.path import path_length
+from offroad_path.sequence import meta as meta_keys
 from offroad_path.sequence.calibration import StereoCalibration
 from offroad_path.sequence.png import FAST_PNG
 from offroad_path.sequence.poses import poses_to_text
@@ -79,7 +80,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
     vehicle = cfg.vehicle
     distance = path_length(world.poses)
     meta = {
-        "generator": "offroad_path.world",
+        meta_keys.GENERATOR: meta_keys.RENDERED,
         "generator_version": __version__,
         "seed": seed,
         "rig": cfg.rig.name,
@@ -102,7 +103,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         "world_frame": "x right, y down (gravity), z forward at the start",
         "distance_m": distance,
         "frames": len(world.poses),
-    } | ({"split": "test"} if held_out else {})
+    } | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {})
     if world.slip is not None:  # only then: a world without slip keeps today's meta.json byte for byte
         meta["steering"] = (
             "the driver's input under slip (world.slip): bicycle-model wheel angle of the true curvature "
@@ -111,7 +112,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         meta["slip"] = OmegaConf.to_container(cfg.slip) if OmegaConf.is_config(cfg.slip) else asdict(cfg.slip)
     (out_dir / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
     summary = {"name": out_dir.name, "seed": seed, "frames": len(world.poses), "distance_m": distance}
-    return summary | ({"split": "test"} if held_out else {}) | {"class_pixels": class_pixels.tolist()}
+    return summary | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {}) | {"class_pixels": class_pixels.tolist()}
 
 
 def _record_job(args: tuple[WorldConfig, int, str, bool]) -> dict:
