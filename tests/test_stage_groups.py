@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import subprocess
 import sys
 
 import pytest
@@ -96,3 +97,16 @@ def test_a_search_without_the_search_extra_says_which_extra_to_install(monkeypat
     assert capsys.readouterr().err == (
         "error: hparams_search: needs the [search] extra (hydra-optuna-sweeper is not installed): pip install -e '.[search]'\n"
     )
+
+
+@pytest.mark.parametrize("command", ["train", "evaluate", "train_steering", "drive"])
+def test_a_bad_key_and_help_are_answered_before_torch_is_imported(command):
+    """The stages that train or run networks import them inside the stage function: a refusal and
+    --help take about a second (benchmarks/refusal_time.py), not the 6-15 s of importing Lightning."""
+    for args, code in ((["bogus_key=1"], 2), (["--help"], 0)):
+        run = subprocess.run([sys.executable, "-X", "importtime", "-m", f"offroad_path.{command}", *args], capture_output=True, text=True)
+        assert run.returncode == code, run.stderr[-500:]
+        imported = {line.split("|")[-1].strip() for line in run.stderr.splitlines() if line.startswith("import time:")}
+        heavy = imported & {"torch", "lightning", "mlflow"}
+        assert not heavy, f"{command} {args[0]} imported {sorted(heavy)}"
+    assert "== Config groups it reads" in run.stdout and f"Stage `{command}`" in run.stdout

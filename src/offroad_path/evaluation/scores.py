@@ -49,9 +49,9 @@ def iou(c: Array) -> Array:
 def iou_per_image(c: Array) -> Array:
     """IoU of single images: one with no path in either prediction or truth scores 1 (not nan),
     so that a per-image mean counts a correctly empty image as right."""
-    union = c[..., TP] + c[..., FP] + c[..., FN]
-    one = torch.ones_like(union, dtype=torch.float64) if isinstance(c, torch.Tensor) else 1.0
-    return torch.where(union > 0, iou(c), one) if isinstance(c, torch.Tensor) else np.where(union > 0, iou(c), one)
+    found = iou(c)
+    found[(c[..., TP] + c[..., FP] + c[..., FN]) == 0] = 1.0
+    return found
 
 
 Score = Callable[[np.ndarray], np.ndarray]
