@@ -16,9 +16,9 @@ import argparse
 import time
 
 import torch
+from hydra.utils import instantiate
 
 from offroad_path.config import load_config
-from offroad_path.data.datamodule import OffroadDataModule
 
 SIZES = {"laptop 128 x 72": (128, 72), "paper 512 x 288": (512, 288)}
 
@@ -27,7 +27,7 @@ def rates(split_dir: str, size: tuple[int, int], workers: int, cache_mb: float, 
     width, height = size
     cfg = load_config(f"data.split_dir={split_dir}", f"data.width={width}", f"data.height={height}", f"data.num_workers={workers}",
                       f"data.cache_mb={cache_mb}", "mlflow.enabled=false")  # fmt: skip
-    data = OffroadDataModule.from_config(cfg.data, "path", seed=0)
+    data = instantiate(cfg.data, target="path", seed=0)
     data.setup()
     loader = data.train_dataloader()
     seconds = []

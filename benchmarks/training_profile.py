@@ -23,9 +23,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
+from hydra.utils import instantiate
 
 from offroad_path.config import load_config
-from offroad_path.data.datamodule import OffroadDataModule
 from offroad_path.training.task import SegmentationTask
 
 
@@ -43,7 +43,7 @@ def main() -> None:
 
     startup = min(timed(lambda: subprocess.run([sys.executable, "-c", "import offroad_path.train"], check=True))[0] for _ in range(2))
     cfg = load_config(f"model={args.model}", f"data.split_dir={args.split_dir}", "mlflow.enabled=false")
-    data = OffroadDataModule.from_config(cfg.data, "path", cfg.seed)
+    data = instantiate(cfg.data, target="path", seed=cfg.seed)
     data.setup()
     train = data.samples["train"]
     decode, _ = timed(lambda: [(cv2.imread(s.image), cv2.imread(s.label, cv2.IMREAD_GRAYSCALE)) for s in train])

@@ -46,11 +46,11 @@ def hand_counted_iou(cfg, checkpoint: Path) -> float:
     tests), counted with NumPy from the argmax at the network's input size, as the task's test
     metric should count it."""
     import torch
+    from hydra.utils import instantiate
 
-    from offroad_path.data.datamodule import OffroadDataModule
     from offroad_path.inference.runners import TorchModel
 
-    data = OffroadDataModule.from_config(cfg.data, "path", cfg.seed)
+    data = instantiate(cfg.data, target="path", seed=cfg.seed)
     data.setup()
     batch = next(iter(data.test_dataloader()))
     with torch.no_grad():

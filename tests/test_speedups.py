@@ -11,15 +11,15 @@ import time
 import cv2
 import pytest
 import torch
+from hydra.utils import instantiate
 from torch.utils.data import DataLoader
 
-from offroad_path.data.datamodule import OffroadDataModule
 from offroad_path.utils.threads import busy_cores, is_thread_setting, set_threads, thread_count, usable_cores
 
 
 def epochs_of(split_dir, compose_config, cache_mb: float, epochs: int = 2) -> tuple[list[dict], DataLoader]:
     cfg = compose_config(f"data.split_dir={split_dir}", "data.width=64", "data.height=48", f"data.cache_mb={cache_mb}")
-    data = OffroadDataModule.from_config(cfg.data, "path", seed=3)
+    data = instantiate(cfg.data, target="path", seed=3)
     data.setup()
     loader = data.train_dataloader()
     batches = []

@@ -288,6 +288,7 @@ class SplitConfig:
 
 @dataclass
 class DataConfig:
+    _target_: str = MISSING  # the LightningDataModule these keys are the arguments of (hydra.utils.instantiate)
     split_dir: str = MISSING
     width: int = setting(IMAGE_SIZE)  # network input size; labels and predictions stay at the recorded size
     height: int = setting(IMAGE_SIZE)

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import lightning as L
-from omegaconf import DictConfig
 from torch.utils.data import DataLoader
 
 from offroad_path.data.dataset import Augmentation, EpochSampler, ManifestDataset, transforms
@@ -16,7 +15,7 @@ class OffroadDataModule(L.LightningDataModule):
     """train / val / test loaders for target 'path' (2 classes) or 'semantic' (8 classes)."""
 
     # Each argument is a hyper-parameter saved flat in the checkpoint (predict reads the input size
-    # from it); build one from config with from_config.
+    # from it); conf/data holds them: hydra.utils.instantiate(cfg.data, target=..., seed=...).
     def __init__(  # noqa: PLR0913
         self,
         *,
@@ -37,12 +36,6 @@ class OffroadDataModule(L.LightningDataModule):
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
         self.split_dir = Path(split_dir)
         self.samples: dict[str, list[Sample]] = {}
-
-    @classmethod
-    def from_config(cls, data: DictConfig, target: str, seed: int) -> OffroadDataModule:
-        """From the `data` config node (conf/data/default.yaml) for target 'path' or 'semantic'."""
-        settings = ("width", "height", "batch_size", "num_workers", "pin_memory", "augment", "jitter", "min_scale", "cache_mb")
-        return cls(split_dir=data.split_dir, target=target, **{k: data[k] for k in settings}, seed=seed)
 
     def setup(self, stage: str | None = None) -> None:
         """Read the manifests and check that every file they list exists, before any training."""

@@ -239,7 +239,7 @@ def fit_segmentation(
     out_dir = Path(own.out_dir)
     pretraining_name = pretraining.name if pretraining is not None else "none"
     L.seed_everything(cfg.seed, workers=True)
-    data = OffroadDataModule.from_config(cfg.data, target, cfg.seed)
+    data: OffroadDataModule = instantiate(cfg.data, target=target, seed=cfg.seed)
     data.setup()  # every listed file exists, before any training
     task = SegmentationTask.from_config(m, NUM_CLASSES[target], own.channels_last)
     loaded = initialise(task.model, pretraining_name, pretraining, m.name, m.width)
