@@ -47,7 +47,7 @@ def test_each_network_overfits_one_batch(compose_config, model):
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
-        losses.append(float(loss))
+        losses.append(loss.item())
     assert losses[-1] < losses[0] / LOSS_FACTOR, f"{model}: loss {losses[0]:.3f} -> {losses[-1]:.3f} in {STEPS} steps"
     predicted = task(images).argmax(1)
     assert pooled(counts(predicted.numpy().astype(np.float32), targets.numpy())).iou > 0.8
