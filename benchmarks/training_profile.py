@@ -26,7 +26,6 @@ import torch
 from hydra.utils import instantiate
 
 from offroad_path.config import load_config
-from offroad_path.training.task import SegmentationTask
 
 
 def timed(fn) -> tuple[float, object]:
@@ -53,7 +52,7 @@ def main() -> None:
     loader.sampler.set_epoch(1)
     load, _ = timed(lambda: list(loader))  # every later epoch: from the cache
 
-    task = SegmentationTask.from_config(cfg.model, 2, cfg.train.channels_last)
+    task = instantiate(cfg.model, num_classes=2, channels_last=cfg.train.channels_last, _convert_="all")
     optimiser = torch.optim.SGD(task.parameters(), lr=cfg.model.lr, momentum=cfg.model.momentum)
     task.train()
 

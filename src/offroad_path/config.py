@@ -312,6 +312,7 @@ class PaperTrainingConfig:
 
 @dataclass
 class ModelConfig:
+    _target_: str = MISSING  # the task's builder (training.task.segmentation_task); the keys below are its arguments
     name: str = setting(one_of(_model_names))
     width: float = setting(positive())  # channel multiplier: 1 is the original network
     lr: float = setting(positive())

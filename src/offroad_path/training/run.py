@@ -241,7 +241,7 @@ def fit_segmentation(
     L.seed_everything(cfg.seed, workers=True)
     data: OffroadDataModule = instantiate(cfg.data, target=target, seed=cfg.seed)
     data.setup()  # every listed file exists, before any training
-    task = SegmentationTask.from_config(m, NUM_CLASSES[target], own.channels_last)
+    task: SegmentationTask = instantiate(m, num_classes=NUM_CLASSES[target], channels_last=own.channels_last, _convert_="all")
     loaded = initialise(task.model, pretraining_name, pretraining, m.name, m.width)
     if loaded:
         log.info("initialised %d parameter tensors from %s pretraining", len(loaded), pretraining_name)

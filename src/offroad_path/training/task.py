@@ -8,7 +8,6 @@ import bisect
 import lightning as L
 import torch
 import torch.nn.functional as F
-from omegaconf import DictConfig
 from torchmetrics import Metric, MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassJaccardIndex
 from torchmetrics.functional.classification import binary_stat_scores
@@ -80,7 +79,7 @@ class SegmentationTask(BaseTask):
     monitor, mode = "val/iou", "max"
 
     # Each argument is a hyper-parameter saved flat in the checkpoint, which TorchModel rebuilds
-    # the task from; build one from config with from_config.
+    # the task from; conf/model/<name>.yaml builds one through segmentation_task (its `_target_`).
     def __init__(  # noqa: PLR0913
         self,
         *,
@@ -98,15 +97,6 @@ class SegmentationTask(BaseTask):
         super().__init__()
         self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
         self.configure()
-
-    @classmethod
-    def from_config(cls, model: DictConfig, num_classes: int, channels_last: bool) -> SegmentationTask:
-        """From a `model` config node (conf/model/<name>.yaml)."""
-        optimiser = {k: model[k] for k in ("lr", "lr_gamma", "lr_warmup", "momentum", "weight_decay")}
-        milestones = [float(f) for f in model.lr_milestones]
-        return cls(
-            model=model.name, num_classes=num_classes, width=model.width, lr_milestones=milestones, **optimiser, channels_last=channels_last
-        )
 
     @classmethod
     def for_inference(cls, hp: dict) -> SegmentationTask:
@@ -151,6 +141,16 @@ class SegmentationTask(BaseTask):
         self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(scores), sync_dist=True)
         self.log_dict(metrics, on_step=False, on_epoch=True)
         return loss
+
+
+def segmentation_task(
+    *, name: str, num_classes: int, channels_last: bool, imagenet_weights: str | None = None, paper: dict | None = None, **hyperparameters
+) -> SegmentationTask:
+    """The task of conf/model/<name>.yaml, its `_target_`: hydra.utils.instantiate(cfg.model,
+    num_classes=..., channels_last=..., _convert_="all"). Every key of the file is an argument of
+    SegmentationTask but the two that other settings read: imagenet_weights (pretraining=imagenet)
+    and paper (experiment=paper)."""
+    return SegmentationTask(model=name, num_classes=num_classes, channels_last=channels_last, **hyperparameters)
 
 
 def sgd_with_milestones(task: L.LightningModule):
