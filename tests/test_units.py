@@ -174,3 +174,42 @@ def test_the_output_rule_refuses_an_output_inside_an_input_or_a_folder_of_yours(
     with pytest.raises(UnsafeOutputError, match=r"was not written by this project"):
         check_outputs(Outputs("label", files={"label.metrics_path": tmp_path / "notes.json"}))
     check_outputs(Outputs("label", folders={"label.out_dir": tmp_path / "new"}, files={"label.metrics_path": tmp_path / "m.json"}))
+
+
+def test_the_configured_callbacks_follow_the_task_and_name_a_bad_one():
+    from lightning.pytorch.callbacks import EarlyStopping, LearningRateMonitor
+
+    from offroad_path.steering.task import SteeringTask
+    from offroad_path.training.callbacks import configured_callbacks
+    from offroad_path.training.task import SegmentationTask
+
+    callbacks = OmegaConf.create(
+        {
+            "early_stopping": {"_target_": "lightning.pytorch.callbacks.EarlyStopping", "patience": 3},
+            "lr_monitor": {"_target_": "lightning.pytorch.callbacks.LearningRateMonitor"},
+        }
+    )
+    stopping, monitor = configured_callbacks(callbacks, SegmentationTask, validate=True, patience=None)
+    assert isinstance(stopping, EarlyStopping) and isinstance(monitor, LearningRateMonitor)
+    assert (stopping.monitor, stopping.mode, stopping.patience) == ("val/iou", "max", 3)
+    (stopping, _) = configured_callbacks(callbacks, SteeringTask, validate=True, patience=7)
+    assert (stopping.monitor, stopping.mode, stopping.patience) == ("val/mae", "min", 7)
+    assert [type(c) for c in configured_callbacks(callbacks, SegmentationTask, validate=False, patience=None)] == [LearningRateMonitor]
+    bad = OmegaConf.create({"mine": {"_target_": "lightning.pytorch.callbacks.NoSuchCallback"}})
+    with pytest.raises(ValueError, match=r"callbacks\.mine: cannot be built"):
+        configured_callbacks(bad, SegmentationTask, validate=True, patience=None)
+
+
+def test_each_epoch_is_seeded_from_the_run_seed_and_the_epoch():
+    from offroad_path.training.callbacks import SeedEachEpoch
+
+    @dataclass
+    class AtEpoch:
+        current_epoch: int
+
+    def draws(seed: int, epoch: int) -> tuple[float, float]:
+        SeedEachEpoch(seed).on_train_epoch_start(AtEpoch(epoch), None)
+        return float(torch.rand(1)), float(np.random.rand())
+
+    assert draws(0, 1) == draws(0, 1)  # a resumed epoch draws what the uninterrupted one drew
+    assert len({draws(0, 0), draws(0, 1), draws(1, 0)}) == 3
