@@ -1,10 +1,11 @@
-"""How much a network's laptop test IoU moves with the training seed alone, and whether a preset
-change is admissible under the seed rule: each network trained from scratch once per seed, scored
-the evaluate stage's way.
+"""How much a network's laptop test score moves with the training seed alone, and whether a preset
+change is admissible under the rule for changes that alter results: each network trained from
+scratch once per seed, scored the evaluate stage's way; PilotNet by its mean absolute error.
 
-    python benchmarks/seed_spread.py [--seeds 0 1 2] [--models segnet fcn unet] [--json OUT] [--labels-from CHECKOUT]
-        [--runs-dir data/runs] [-- overrides]
-    python benchmarks/seed_spread.py --compare REFERENCE.json CANDIDATE.json
+    python benchmarks/seed_spread.py [--seeds 0 1 2 3 4] [--models segnet fcn unet pilotnet] [--json OUT]
+        [--labels-from CHECKOUT] [--runs-dir data/runs] [--steering-dir data/steering] [-- overrides]
+    python benchmarks/seed_spread.py --merge OUT IN [IN ...]
+    python benchmarks/seed_spread.py --compare REFERENCE.json CANDIDATE.json [--margin 0.02] [--mae-margin 0.01]
 
 Needs the split of a finished `dvc repro` (data/split, data/labels) in the working directory. Each
 run is `python -m offroad_path.train pretraining=none seed=S` (MLflow off) into a temporary
@@ -15,18 +16,24 @@ also writes each run's per-image counts and the mean-path prior's. `--labels-fro
 against another checkout's test labels instead (its data/split/test.csv; frames matched by
 sequence, frame and mirroring, maps resized bilinearly to the labels' size): a preset that renders
 the same test worlds at another size is then scored on the same yardstick as the reference.
-`--runs-dir data/runs` scores the pipeline's own runs (seed 0 of `dvc repro`) instead of training
-them again; only valid when the overrides are none (the runs were made with the checkout's config).
+`--runs-dir data/runs` (and `--steering-dir data/steering` for PilotNet) scores the pipeline's own
+runs (the seeds of `dvc repro`) instead of training them again; only valid when the overrides are
+none (the runs were made with the checkout's config). `pilotnet` is `python -m
+offroad_path.train_steering seed=S`, scored by its test predictions (predictions.csv). `--merge`
+joins files of the same preset that hold other seeds (the pipeline's own and more trained here).
 
-`--compare` applies the rule for changes that alter results (benchmarks/README.md): per network,
-the candidate is admissible when its mean IoU over the seeds is at least the reference's minus
-one standard error of the paired (by seed) difference, and no seed collapses (every seed's IoU
-above the mean-path prior's), both on the test images both files scored.
+`--compare` applies the rule for changes that alter results (benchmarks/README.md): per path
+network, the candidate is admissible when the one-sided 95 % lower bound (Student's t over the
+seeds) of the paired (by seed) difference in pooled test IoU, candidate - reference, is above
+-margin, and no seed collapses (every seed's IoU above the mean-path prior's); for PilotNet, when
+the upper bound of the paired difference in mean absolute error is below +mae-margin and every seed
+is below always-straight-ahead's error. Both on the test frames both files scored.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import math
 import statistics
@@ -44,6 +51,8 @@ from scipy import stats
 from offroad_path.data.loading import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
 from offroad_path.evaluation.metrics import counts, mean_path, pooled
+
+PER_SEED = ("seeds", "score", "epochs", "seconds", "counts")  # a network's lists in the --json file, one entry per seed
 
 
 def key(sample: Sample) -> str:
@@ -88,61 +97,137 @@ def iou(per_image: dict[str, list[int]], keys: list[str]) -> float:
     return pooled(np.array([per_image[k] for k in keys])).iou
 
 
-def train_seeds(
-    models: list[str], seeds: list[int], overrides: list[str], yardstick: dict[str, str] | None, runs_dir: Path | None
-) -> dict[str, dict]:
-    print("| network | seed | test IoU | epochs | seconds |\n| --- | --- | --- | --- | --- |")
+def steering_errors(run_dir: Path) -> tuple[dict[str, float], dict[str, float]]:
+    """Per test frame (by frame key) PilotNet's absolute error and always-straight-ahead's (|true|), from predictions.csv."""
+    errors, straight = {}, {}
+    with open(run_dir / "predictions.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            frame = f"{row['sequence']}/{row['frame']}/{int(row['mirrored'] == 'True')}"
+            errors[frame] = abs(float(row["predicted"]) - float(row["true"]))
+            straight[frame] = abs(float(row["true"]))
+    return errors, straight
+
+
+def mae(errors: dict[str, float], keys: list[str]) -> float:
+    return float(np.mean([errors[k] for k in keys]))
+
+
+def train_command(model: str, seed: int, out: Path, overrides: list[str]) -> list[str]:
+    """The stage that trains `model` from scratch with `seed` into `out` (MLflow off, never resumed)."""
+    common = [f"seed={seed}", "resume=false", "mlflow.enabled=false", *overrides]
+    if model == "pilotnet":
+        return [sys.executable, "-m", "offroad_path.train_steering", f"steering.out_dir={out}",
+                f"steering.metrics_path={out}.json", f"steering.plots_path={out}.csv", *common]  # fmt: skip
+    return [sys.executable, "-m", "offroad_path.train", f"model={model}", "pretraining=none", f"train.out_dir={out}", *common]
+
+
+def pipeline_run(args: argparse.Namespace, model: str, seed: int) -> Path | None:
+    """The pipeline's own run of `model` and `seed` (--runs-dir, --steering-dir), when given and finished."""
+    where = args.steering_dir if model == "pilotnet" else args.runs_dir and args.runs_dir / f"{model}-none"
+    done = where / f"seed{seed}" if where else None
+    return done if done is not None and (done / "metrics.json").is_file() else None
+
+
+def train_seeds(args: argparse.Namespace, yardstick: dict[str, str] | None) -> dict[str, dict]:
+    """Each of args.models at each of args.seeds (with args.overrides), trained here unless the pipeline's run is given."""
+    print("| network | seed | test IoU (PilotNet: MAE) | epochs | seconds |\n| --- | --- | --- | --- | --- |")
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for model in models:
-            for seed in seeds:
+        for model in args.models:
+            for seed in args.seeds:
                 out, seconds = Path(tmp) / f"{model}-{seed}", 0.0
-                done = Path(runs_dir or tmp) / f"{model}-none" / f"seed{seed}"
-                if (done / "metrics.json").is_file():  # the pipeline's own run, with the same config
+                if done := pipeline_run(args, model, seed):  # made with the same config
                     out = done
                 else:
-                    command = [sys.executable, "-m", "offroad_path.train", f"model={model}", "pretraining=none", f"seed={seed}",
-                               f"train.out_dir={out}", "resume=false", "mlflow.enabled=false", *overrides]  # fmt: skip
+                    command = train_command(model, seed, out, args.overrides)
                     start = time.perf_counter()
                     run = subprocess.run(command, capture_output=True, text=True)
                     seconds = time.perf_counter() - start
                     if run.returncode:
                         sys.exit(f"{' '.join(command)} failed:\n{run.stderr[-3000:]}")
-                per_image, epochs = test_counts(out, yardstick), json.loads((out / "metrics.json").read_text())["epochs"]
-                row = results.setdefault(model, {"seeds": [], "iou": [], "epochs": [], "seconds": [], "counts": []})
-                for name, value in zip(row, (seed, iou(per_image, list(per_image)), epochs, round(seconds, 1), per_image), strict=True):
+                epochs = json.loads((out / "metrics.json").read_text())["epochs"]
+                row = results.setdefault(model, {key: [] for key in PER_SEED})
+                if model == "pilotnet":
+                    errors, straight = steering_errors(out)
+                    row["straight"] = straight
+                    score, per_frame = mae(errors, list(errors)), errors
+                else:
+                    per_frame = test_counts(out, yardstick)
+                    score = iou(per_frame, list(per_frame))
+                values = (seed, score, epochs, round(seconds, 1), per_frame)
+                for name, value in zip(PER_SEED, values, strict=True):
                     row[name].append(value)
-                print(f"| {model} | {seed} | {row['iou'][-1]:.4f} | {epochs} | {seconds:.0f} |", flush=True)
+                print(f"| {model} | {seed} | {score:.4f} | {epochs} | {seconds:.0f} |", flush=True)
     return results
 
 
-def compare(reference: dict, candidate: dict) -> bool:
+def merge(files: list[dict]) -> dict:
+    """One file of the same preset and yardstick from several that hold other seeds, seeds in order."""
+    first = files[0]
+    if any((f["overrides"], f["labels"]) != (first["overrides"], first["labels"]) for f in files):
+        sys.exit("--merge: the files were made with other overrides or labels")
+    models: dict[str, dict] = {}
+    for f in files:
+        for model, row in f["models"].items():
+            into = models.setdefault(model, {key: [] for key in PER_SEED})
+            for key in PER_SEED:
+                into[key] += row[key]
+            if "straight" in row:
+                into["straight"] = row["straight"]
+    for model, row in models.items():
+        if len(set(row["seeds"])) != len(row["seeds"]):
+            sys.exit(f"--merge: {model} has seed {row['seeds']} twice")
+        order = np.argsort(row["seeds"])
+        for key in PER_SEED:
+            row[key] = [row[key][i] for i in order]
+    return {**first, "models": models}
+
+
+def one_sided(diffs: list[float], sign: int) -> tuple[float, float, float, float]:
+    """Mean, sample sd, standard error and the one-sided 95 % bound (lower for sign +1, upper for -1) of paired differences."""
+    n, mean_d = len(diffs), statistics.mean(diffs)
+    sd = statistics.stdev(diffs) if n > 1 else math.nan
+    se = sd / math.sqrt(n)
+    return mean_d, sd, se, mean_d - sign * float(stats.t.ppf(0.95, n - 1)) * se
+
+
+def compare(reference: dict, candidate: dict, margin: float = 0.02, mae_margin: float = 0.01) -> bool:
     """Print the rule's table per network, on the test frames both files scored; True when every network is admissible."""
-    runs = [c for file in (reference, candidate) for model in file["models"].values() for c in model["counts"]]
+    for model, ref in reference["models"].items():
+        new = candidate["models"].get(model)
+        if new is None or new["seeds"] != ref["seeds"]:
+            sys.exit(f"--compare: {model} was not run with the same seeds in both files")
+    paths = [m for m in reference["models"] if m != "pilotnet"]
+    runs = [c for file in (reference, candidate) for model in paths for c in file["models"][model]["counts"]]
     keys = sorted(set.intersection(*(set(c) for c in [*runs, candidate["prior"]])))
     print(f"reference: {' '.join(reference['overrides']) or '(none)'}\ncandidate: {' '.join(candidate['overrides']) or '(none)'}")
     print(f"scored against: {candidate['labels']}; {len(keys)} test images both scored "
           f"(reference {len(reference['prior'])}, candidate {len(candidate['prior'])})")  # fmt: skip
     prior = iou(candidate["prior"], keys)
-    print(f"mean-path prior: {prior:.4f}\n")
+    print(f"mean-path prior: {prior:.4f}; margin {margin} IoU (PilotNet: {mae_margin} MAE)\n")
     print("| network | reference mean | candidate mean | paired differences (seeds in order) | mean ± sd | standard error | "
-          "95 % interval | lowest seed | admissible |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |")  # fmt: skip
+          "one-sided 95 % bound | worst seed | admissible |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |")  # fmt: skip
     admissible_all = True
-    for model, ref in reference["models"].items():
-        new = candidate["models"].get(model)
-        if new is None or new["seeds"] != ref["seeds"]:
-            sys.exit(f"--compare: {model} was not run with the same seeds in both files")
-        old_iou, new_iou = ([iou(c, keys) for c in row["counts"]] for row in (ref, new))
-        diffs = [b - a for a, b in zip(old_iou, new_iou, strict=True)]
-        n, mean_d = len(diffs), statistics.mean(diffs)
-        sd = statistics.stdev(diffs) if n > 1 else math.nan
-        se = sd / math.sqrt(n)
-        half = float(stats.t.ppf(0.975, n - 1)) * se
-        ok = mean_d >= -se and min(new_iou) > prior
+    for model in reference["models"]:
+        ref, new = reference["models"][model], candidate["models"][model]
+        if model == "pilotnet":
+            frames = sorted(set.intersection(*(set(c) for c in [*ref["counts"], *new["counts"]])))
+            old_score, new_score = ([mae(c, frames) for c in row["counts"]] for row in (ref, new))
+            mean_d, sd, se, bound = one_sided([b - a for a, b in zip(old_score, new_score, strict=True)], -1)
+            worst, floor = max(new_score), mae(new["straight"], frames)
+            ok = bound < mae_margin and worst < floor
+            label, worst_text = f"pilotnet (MAE, {len(frames)} frames; straight ahead {floor:.4f})", f"{worst:.4f}"
+        else:
+            old_score, new_score = ([iou(c, keys) for c in row["counts"]] for row in (ref, new))
+            mean_d, sd, se, bound = one_sided([b - a for a, b in zip(old_score, new_score, strict=True)], +1)
+            worst = min(new_score)
+            ok = bound > -margin and worst > prior
+            label, worst_text = model, f"{worst:.4f}"
         admissible_all &= ok
-        print(f"| {model} | {statistics.mean(old_iou):.4f} | {statistics.mean(new_iou):.4f} | "
+        diffs = [b - a for a, b in zip(old_score, new_score, strict=True)]
+        print(f"| {label} | {statistics.mean(old_score):.4f} | {statistics.mean(new_score):.4f} | "
               f"{', '.join(f'{d:+.3f}' for d in diffs)} | {mean_d:+.4f} ± {sd:.4f} | {se:.4f} | "
-              f"[{mean_d - half:+.4f}, {mean_d + half:+.4f}] | {min(new_iou):.4f} | {'yes' if ok else 'no'} |")  # fmt: skip
+              f"{bound:+.4f} | {worst_text} | {'yes' if ok else 'no'} |")  # fmt: skip
     return admissible_all
 
 
@@ -155,22 +240,33 @@ def main() -> None:
     parser.add_argument(
         "--runs-dir", type=Path, help="score RUNS_DIR/<model>-none/seed<k> where it exists instead of training it (data/runs)"
     )
-    parser.add_argument("--compare", type=Path, nargs=2, metavar=("REFERENCE", "CANDIDATE"), help="apply the seed rule to two --json files")
+    parser.add_argument(
+        "--steering-dir", type=Path, help="score STEERING_DIR/seed<k> (PilotNet) where it exists instead of training it (data/steering)"
+    )
+    parser.add_argument("--merge", type=Path, nargs="+", metavar=("OUT", "IN"), help="join --json files of other seeds into OUT")
+    parser.add_argument("--compare", type=Path, nargs=2, metavar=("REFERENCE", "CANDIDATE"), help="apply the rule to two --json files")
+    parser.add_argument("--margin", type=float, default=0.02, help="non-inferiority margin in test IoU (path networks)")
+    parser.add_argument("--mae-margin", type=float, default=0.01, help="non-inferiority margin in mean absolute error (PilotNet)")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides of the train stage, after --")
     args = parser.parse_args()
     if args.compare:
         reference, candidate = (json.loads(p.read_text()) for p in args.compare)
-        sys.exit(0 if compare(reference, candidate) else 1)
-    if args.runs_dir and args.overrides:
+        sys.exit(0 if compare(reference, candidate, args.margin, args.mae_margin) else 1)
+    if args.merge:
+        if len(args.merge) < 3:
+            parser.error("--merge OUT IN [IN ...]: at least two files to join")
+        args.merge[0].write_text(json.dumps(merge([json.loads(p.read_text()) for p in args.merge[1:]])) + "\n")
+        return
+    if (args.runs_dir or args.steering_dir) and args.overrides:
         parser.error("--runs-dir scores runs made with the checkout's config: give no overrides with it")
     print(f"overrides: {' '.join(args.overrides) or '(none: the laptop preset)'}")
     yardstick = yardstick_labels(args.labels_from.resolve() if args.labels_from else None)
-    results = train_seeds(args.models, args.seeds, args.overrides, yardstick, args.runs_dir)
+    results = train_seeds(args, yardstick)
     prior = prior_counts(yardstick)
     print(f"\nmean-path prior: {iou(prior, list(prior)):.4f}\n")
-    print("| network | mean IoU | standard deviation | range |\n| --- | --- | --- | --- |")
+    print("| network | mean IoU (PilotNet: MAE) | standard deviation | range |\n| --- | --- | --- | --- |")
     for model, row in results.items():
-        ious = row["iou"]
+        ious = row["score"]
         spread = statistics.stdev(ious) if len(ious) > 1 else float("nan")
         print(f"| {model} | {statistics.mean(ious):.4f} | {spread:.4f} | {min(ious):.4f} to {max(ious):.4f} |")
     if args.json:

@@ -12,6 +12,7 @@ from pathlib import Path
 import yaml
 from helpers import ROOT, git
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 from torch import nn
 
 from offroad_path.models import MODELS, SegmentationNet
@@ -89,4 +90,8 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
     stages = set(listed.stdout.split())
     new = {"pretrain@tiny", "train_scratch@tiny-0", "train_pretrained@tiny-0", "postprocess@tiny-none-0", "postprocess@tiny-segmentation-0"}
     assert new <= stages, listed.stdout + listed.stderr
-    assert len(stages) == 7 + 4 * 5  # synthesize, label, split, evaluate, train_steering, train_steering_slip, drive; 5 per network
+    seeds = OmegaConf.load(repo / "conf" / "evaluate" / "default.yaml").seeds
+    assert {f"train_steering@{s}" for s in seeds} | {f"train_steering_slip@{s}" for s in seeds} <= stages  # both PilotNets per seed
+    # synthesize, label, split, evaluate, drive; two PilotNets per seed; per network a pretraining and, per seed,
+    # two trainings and two post-processings
+    assert len(seeds) == 3 and len(stages) == 5 + 2 * len(seeds) + 4 * (1 + 4 * len(seeds))

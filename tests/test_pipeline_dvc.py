@@ -36,7 +36,7 @@ def lock_entries(repo: Path) -> dict:
 
 def check_closed_loop(repo: Path, steering: dict) -> None:
     """train_steering_slip and drive, against their contracts."""
-    slippery = json.loads((repo / "metrics" / "steering_slip.json").read_text())
+    slippery = json.loads((repo / "metrics" / "steering_slip" / "seed0.json").read_text())
     # the same frames, each steered at least as hard (the factors are at most 1), some harder
     assert slippery["test_frames"] == steering["test_frames"]
     assert slippery["straight_ahead_mean_absolute_error"] > steering["straight_ahead_mean_absolute_error"]
@@ -56,7 +56,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     elsewhere = tiny_repo(repo_copy.parent / "another" / "place" / "repo")
     out, _ = dvc_at_once([(repo_copy, ["repro"]), (elsewhere, ["repro", "split"])])
     ran = set(re.findall(r"Running stage '([^']+)'", out))
-    stages = {"synthesize", "label", "split", "evaluate", "train_steering", "train_steering_slip", "drive"}
+    stages = {"synthesize", "label", "split", "evaluate", "train_steering@0", "train_steering_slip@0", "drive"}
     stages |= {f"pretrain@{m}" for m in GRID}
     stages |= {f"{s}@{m}-0" for s in ("train_scratch", "train_pretrained") for m in GRID}
     stages |= {f"postprocess@{m}-{p}-0" for m in GRID for p in ("none", "segmentation")}
@@ -87,7 +87,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     assert len((repo_copy / "data" / "evaluation" / "results.csv").read_text().splitlines()) == 1 + 2 * 2 * len(GRID)
     assert len(list((repo_copy / "metrics" / "precision_recall").glob("*.csv"))) == 2 * len(GRID)
     assert {p.name for p in (repo_copy / "data" / "evaluation" / "figures").iterdir()} == {"good_and_bad_cases.png", "postprocessing.png"}
-    steering = json.loads((repo_copy / "metrics" / "steering.json").read_text())
+    steering = json.loads((repo_copy / "metrics" / "steering" / "seed0.json").read_text())
     assert steering["test_frames"] > 0 and 0 <= steering["mean_absolute_error"] <= 2
     check_closed_loop(repo_copy, steering)
     assert "unet-none" in dvc(repo_copy, "metrics", "show")

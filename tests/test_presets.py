@@ -60,16 +60,17 @@ def test_full_preset_drives_every_network_at_the_worlds_size(compose_config):
     assert not laptop.world.slip.enabled and not full.world.slip.enabled
 
 
-def test_laptop_fast_is_the_laptop_preset_with_a_smaller_world_and_shorter_pretraining(compose_config):
-    """The seed rule's candidate of the second speed round (benchmarks/README.md), one override away."""
-    laptop, fast = compose_config(), compose_config("experiment=laptop_fast")
-    changed = {"world.width": 256, "world.height": 144, "postprocess.sigma": 3.0, "evaluate.figure_scale": 1.0,
-               "pretrain.max_epochs": 2}  # fmt: skip
+def test_laptop_reference_is_the_earlier_laptop_preset_one_override_away(compose_config):
+    """The reference of the rule for changes that alter results (benchmarks/README.md, "Three seeds"): the
+    world at 512 x 288 and 4 epochs of pretraining; everything else is the default's."""
+    laptop, reference = compose_config(), compose_config("experiment=laptop_reference")
+    changed = {"world.width": 512, "world.height": 288, "postprocess.sigma": 6.0, "evaluate.figure_scale": 0.5,
+               "pretrain.max_epochs": 4}  # fmt: skip
     for key, value in changed.items():
         group, name = key.split(".")
-        assert fast[group][name] == value != laptop[group][name], key
-    for group in ("data", "model", "trainer", "label", "split", "synthesize", "steering"):  # the rest is the laptop's
-        assert fast[group] == laptop[group], group
+        assert reference[group][name] == value != laptop[group][name], key
+    for group in ("data", "model", "trainer", "label", "split", "synthesize", "steering"):  # the rest is the default's
+        assert reference[group] == laptop[group], group
 
 
 def full_size_on_cpu(tmp_path, split_dir) -> list[str]:
@@ -90,3 +91,19 @@ def test_paper_preset_trains_without_a_validation_set(compose_config, labelled_d
     assert metrics["best_val_iou"] is None and metrics["global_step"] == 1
     assert metrics["test/iou"] == pytest.approx(hand_counted_iou(cfg, tmp_path / "run" / "checkpoints" / "best.ckpt"), abs=1e-6)
     assert (tmp_path / "run" / "checkpoints" / "best.ckpt").is_file()
+
+
+def test_every_trained_network_writes_one_folder_per_seed_and_evaluate_reads_the_grids_first(compose_config):
+    """Seeds are a grid axis (dvc.yaml's matrices read evaluate.seeds): the path networks', post-processing's and
+    both PilotNets' outputs are per seed, so that the stages of three seeds never share a file."""
+    cfg = compose_config("seed=2", "model=fcn")
+    assert list(compose_config().evaluate.seeds) == [0, 1, 2]
+    for path in (cfg.train.out_dir, cfg.postprocess.out_dir, cfg.steering.out_dir, cfg.drive.pilotnets.pilotnet_slip):
+        assert "/seed2" in path, path
+    assert cfg.steering.metrics_path.endswith("metrics/steering/seed2.json")
+    assert cfg.steering.plots_path.endswith("metrics/steering/seed2_scatter.csv")
+    assert cfg.drive.pilotnets.pilotnet.endswith("steering/seed2/checkpoints/best.ckpt")  # drive drives one seed's networks
+    # evaluate's path-against-steering section pairs the first seed's maps with the first seed's PilotNet
+    assert cfg.evaluate.steering_from_paths.pilotnet_predictions.endswith("steering/seed0/predictions.csv")
+    later = compose_config("evaluate.seeds=[3,4]")
+    assert later.evaluate.steering_from_paths.pilotnet_predictions.endswith("steering/seed3/predictions.csv")

@@ -144,7 +144,7 @@ def stage_help(stage: Stage, overrides: list[str]) -> str:
         "",
         "== Config (override any value: key=value; --cfg job --resolve prints it resolved) ==",
         OmegaConf.to_yaml(own),
-        "Presets: experiment=paper|full|laptop_fast; your own data: paths=own paths.root=DIR. Hydra's help: --hydra-help.",
+        "Presets: experiment=paper|full|laptop_reference; your own data: paths=own paths.root=DIR. Hydra's help: --hydra-help.",
     ]
     return "\n".join(lines)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 from pathlib import Path
 
@@ -44,9 +45,10 @@ def _f(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.3f}"
 
 
-def results_markdown(evaluation: dict, label: dict, steering: dict, resamples: int, drive: dict | None = None) -> str:
-    """The results section's body (between the markers) from the metrics files (drive.json: when
-    there is one); resamples: evaluate.bootstrap.resamples of the run that wrote them."""
+def results_markdown(evaluation: dict, label: dict, steering: list[dict], resamples: int, drive: dict | None = None) -> str:
+    """The results section's body (between the markers) from the metrics files (steering: PilotNet's
+    metrics per training seed, the first seed first; drive.json: when there is one); resamples:
+    evaluate.bootstrap.resamples of the run that wrote them."""
     u = evaluation.get("uncertainty", {})
     runs = [key for key, value in evaluation.items() if isinstance(value, dict) and "raw" in value]
     blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
@@ -128,16 +130,23 @@ def _baselines(evaluation: dict) -> list[str]:
     ]
 
 
-def _steering(evaluation: dict, steering: dict) -> list[str]:
+def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
     s = evaluation.get("steering_from_paths", {})
     if "pilotnet" not in s:
         return []
+    first = steering[0] if steering else {}
+    errors = [seed["mean_absolute_error"] for seed in steering]
+    own = f"{_f(first.get('mean_absolute_error'))}" + (
+        f"; over its {len(errors)} training seeds {statistics.mean(errors):.3f} ± {statistics.stdev(errors):.3f}, mean ± sd"
+        if len(errors) > 1
+        else ""
+    )
     lines = [
-        f"Steering on the same test frames (mean absolute error of the normalised angle): always straight ahead "
-        f"{s['straight_ahead']['mae']:.3f}, PilotNet {s['pilotnet']['mae']:.3f} (on its own test set of "
-        f"{steering.get('test_frames', 'n/a')} frames: {_f(steering.get('mean_absolute_error'))}), the ground-truth label "
-        f"through pure pursuit {s['label_ceiling']['mae']:.3f}. Each path network through pure pursuit, and its paired "
-        "difference from PilotNet (below 0: closer to the true angle than PilotNet):\n",
+        f"Steering on the same test frames (mean absolute error of the normalised angle, the first training seed of each "
+        f"network): always straight ahead {s['straight_ahead']['mae']:.3f}, PilotNet {s['pilotnet']['mae']:.3f} (on its own "
+        f"test set of {first.get('test_frames', 'n/a')} frames: {own}), the ground-truth label through pure pursuit "
+        f"{s['label_ceiling']['mae']:.3f}. Each path network through pure pursuit, and its paired difference from "
+        "PilotNet (below 0: closer to the true angle than PilotNet):\n",
         "| method | MAE | minus PilotNet [95 % interval] |",
         "| --- | --- | --- |",
     ]
@@ -225,12 +234,13 @@ def with_results(readme: str, block: str, path: Path = Path("README.md")) -> str
 
 
 def generated(metrics_dir: Path) -> str:
-    read = {name: json.loads((metrics_dir / f"{name}.json").read_text()) for name in ("evaluation", "label", "steering")}
+    read = {name: json.loads((metrics_dir / f"{name}.json").read_text()) for name in ("evaluation", "label")}
     drive = json.loads((metrics_dir / "drive.json").read_text()) if (metrics_dir / "drive.json").is_file() else None
     from offroad_path.config import load_config
 
-    resamples = load_config().evaluate.bootstrap.resamples  # the committed run's: dvc.lock tracks conf/evaluate
-    return results_markdown(read["evaluation"], read["label"], read["steering"], resamples, drive)
+    e = load_config().evaluate  # the committed run's: dvc.lock tracks conf/evaluate
+    steering = [json.loads(path.read_text()) for seed in e.seeds if (path := metrics_dir / "steering" / f"seed{seed}.json").is_file()]
+    return results_markdown(read["evaluation"], read["label"], steering, e.bootstrap.resamples, drive)
 
 
 def main(argv: list[str] | None = None) -> int:
