@@ -25,7 +25,9 @@ SHIFT_PX = 24
 def stage_config(compose_config, split_dir: Path, root: Path, *overrides: str):
     labels_dir = Path(read_manifest(split_dir / "test.csv")[0].label).parents[2]  # <labels>/<sequence>/label/NNNNNN.png
     return compose_config(
-        f"split.out_dir={split_dir}", f"split.labels_dir={labels_dir}", f"steering.out_dir={root / 'steering'}",
+        f"split.out_dir={split_dir}", f"split.labels_dir={labels_dir}",
+        f"evaluate.steering_from_paths.pilotnet_predictions={root / 'steering' / 'predictions.csv'}",
+        "evaluate.seeds=[0]",  # the runs these tests write; one test writes two seeds
         f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
         f"evaluate.out_dir={root / 'evaluation'}", f"evaluate.metrics_path={root / 'metrics.json'}",
         f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}",
