@@ -37,3 +37,16 @@ def test_the_block_needs_both_markers():
         with_results("# no markers\n", "text")
     assert with_results(f"a\n{BEGIN}\nold\n{END}\nb\n", "new\n") == f"a\n{BEGIN}\n\nnew\n\n{END}\nb\n"
     assert "| SegNet | none | no |" in generated(ROOT / "metrics")
+
+
+def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
+    from offroad_path.evaluation.readme import _steering
+
+    row = {"mae": 0.1}
+    evaluation = {"steering_from_paths": {"straight_ahead": {"mae": 0.21}, "pilotnet": row, "label_ceiling": {"mae": 0.07}}}
+    seeds = [{"seed": s, "mean_absolute_error": e, "straight_ahead_mean_absolute_error": 0.213, "test_frames": 10}
+             for s, e in ((0, 0.094), (1, 0.097), (2, 0.213))]  # fmt: skip
+    text = _steering(evaluation, seeds)[0]
+    assert "over its 3 training seeds 0.135 ± 0.068, mean ± sd" in text  # mean 0.1347, sd 0.0679 by hand
+    assert "training seed 2 learnt a constant (1 of 3)" in text
+    assert "learnt a constant" not in _steering(evaluation, seeds[:2])[0]

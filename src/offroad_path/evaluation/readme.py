@@ -47,7 +47,7 @@ def _f(x: float | None) -> str:
 
 def results_markdown(evaluation: dict, label: dict, steering: list[dict], resamples: int, drive: dict | None = None) -> str:
     """The results section's body (between the markers) from the metrics files (steering: PilotNet's
-    metrics per training seed, the first seed first; drive.json: when there is one); resamples:
+    metrics per training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
     evaluate.bootstrap.resamples of the run that wrote them."""
     u = evaluation.get("uncertainty", {})
     runs = [key for key, value in evaluation.items() if isinstance(value, dict) and "raw" in value]
@@ -136,11 +136,19 @@ def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
         return []
     first = steering[0] if steering else {}
     errors = [seed["mean_absolute_error"] for seed in steering]
+    # A seed that learnt a constant (about 0) steers no better than always straight ahead: say so by name.
+    straight = [seed["straight_ahead_mean_absolute_error"] for seed in steering]
+    collapsed = [seed.get("seed", k) for k, seed in enumerate(steering) if errors[k] >= 0.99 * straight[k]]
     own = f"{_f(first.get('mean_absolute_error'))}" + (
         f"; over its {len(errors)} training seeds {statistics.mean(errors):.3f} ± {statistics.stdev(errors):.3f}, mean ± sd"
         if len(errors) > 1
         else ""
     )
+    if collapsed:
+        own += (
+            f"; training seed {', '.join(map(str, collapsed))} learnt a constant ({len(collapsed)} of {len(steering)}) and "
+            "steers no better than straight ahead"
+        )
     lines = [
         f"Steering on the same test frames (mean absolute error of the normalised angle, the first training seed of each "
         f"network): always straight ahead {s['straight_ahead']['mae']:.3f}, PilotNet {s['pilotnet']['mae']:.3f} (on its own "
@@ -239,7 +247,8 @@ def generated(metrics_dir: Path) -> str:
     from offroad_path.config import load_config
 
     e = load_config().evaluate  # the committed run's: dvc.lock tracks conf/evaluate
-    steering = [json.loads(path.read_text()) for seed in e.seeds if (path := metrics_dir / "steering" / f"seed{seed}.json").is_file()]
+    files = {seed: metrics_dir / "steering" / f"seed{seed}.json" for seed in e.seeds}
+    steering = [{**json.loads(path.read_text()), "seed": seed} for seed, path in files.items() if path.is_file()]
     return results_markdown(read["evaluation"], read["label"], steering, e.bootstrap.resamples, drive)
 
 
