@@ -1,5 +1,5 @@
 """The README's results section, generated from the committed run's metrics (metrics/evaluation.json,
-label.json, steering.json, drive.json), so that no number in it is copied by hand or quotes an older run.
+label.json, steering/seed<k>.json, drive.json), so that no number in it is copied by hand or quotes an older run.
 
     python -m offroad_path.evaluation.readme            # rewrite the block between the markers in README.md
     python -m offroad_path.evaluation.readme --check    # exit 1 when README.md disagrees with metrics/
