@@ -9,7 +9,8 @@ For each network at the laptop size (width 0.25, 128 x 72, batch 6, 2 threads, t
   best: the same FLOPs as three steps, in larger tensors);
 - the three seeds stacked (torch.func.stack_module_state + vmap over functional_call, the
   ensembling recipe), which runs each convolution as one grouped convolution;
-- one thread instead of two, and two one-thread processes side by side (two seeds at once).
+- one thread instead of two, and two one-thread processes side by side (two seeds at once);
+- where a step's time goes: the profiler's self time by operator kind.
 The reference for the CPU's reach: a 3x3 convolution of 128 to 128 channels at 128 x 128, batch 8,
 forward and backward, on the same threads.
 """
@@ -22,10 +23,12 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import torch
 import torch.nn.functional as F
 from torch.func import functional_call, stack_module_state, vmap
+from torch.profiler import ProfilerActivity, profile
 from torch.utils.flop_counter import FlopCounterMode
 
 from offroad_path.models import build_model
@@ -80,6 +83,23 @@ def stacked_step(name: str, x: torch.Tensor, y: torch.Tensor) -> Callable[[], No
     return step
 
 
+def time_split(step: Callable[[], None], steps: int) -> str:
+    """Where a step's CPU time goes (torch.profiler, self time by operator kind)."""
+    for _ in range(3):
+        step()
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        for _ in range(steps):
+            step()
+    kinds: dict[str, float] = {}
+    for event in prof.key_averages():
+        key = event.key
+        kinds_of = (("conv", "convolution"), ("mkldnn", "convolution"), ("batch_norm", "batch norm"), ("pool", "pooling"))
+        kind = next((kind for part, kind in kinds_of if part in key), "other")
+        kinds[kind] = kinds.get(kind, 0.0) + event.self_cpu_time_total
+    total = sum(kinds.values())
+    return ", ".join(f"{kind} {seconds / total:.0%}" for kind, seconds in sorted(kinds.items(), key=lambda kv: -kv[1]))
+
+
 def conv_reach(steps: int) -> float:
     """GFLOP/s of a large 3x3 convolution's forward and backward."""
     conv = torch.nn.Conv2d(128, 128, 3, padding=1)
@@ -99,7 +119,7 @@ def one_thread_ms(name: str, steps: int, side_by_side: bool) -> float:
         f"torch.manual_seed(0)\nx, y = torch.randn(6, 3, 72, 128), torch.randint(0, 2, (6, 72, 128))\n"
         f"print(timed(sgd_step(build_model('{name}', 2, 0.25), x, y), {steps}) * 1000)\n"
     )
-    here = str(__import__("pathlib").Path(__file__).parent)
+    here = str(Path(__file__).parent)
     runs = [subprocess.Popen([sys.executable, "-c", code, here], stdout=subprocess.PIPE, text=True) for _ in range(1 + side_by_side)]
     return max(float(run.communicate()[0]) for run in runs)
 
@@ -127,6 +147,10 @@ def main() -> None:
         print(f"| {name} | {work:.2f} | {one * 1000:.0f} | {work / one:.1f} | {work / one / reach:.0%} | "
               f"{batch / one / SEEDS:.2f}x three steps | {stacked / one / SEEDS:.2f}x three steps | {alone:.0f} ms | "
               f"{beside:.0f} ms for two steps at once: {beside / 2 / (one * 1000):.2f}x a 2-thread step each |")  # fmt: skip
+    print("\nWhere a step's time goes (profiler self time):")
+    for name in args.models:
+        x, y = torch.randn(6, 3, 72, 128), torch.randint(0, 2, (6, 72, 128))
+        print(f"- {name}: {time_split(sgd_step(build_model(name, 2, 0.25), x, y), 5)}")
 
 
 if __name__ == "__main__":
