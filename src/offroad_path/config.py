@@ -26,6 +26,8 @@ from offroad_path.utils.threads import is_thread_setting
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 IMAGE_SIZE = between(16, 8192)  # pixels of an image side
 MAX_STEPS = rule(lambda v: v == -1 or v >= 1, "must be -1 (no cap) or an integer >= 1")  # SGD steps, besides max_epochs
+FINITE = rule(lambda v: True, "must be a finite number")
+PITCH = between(-90, 90, low_open=True, high_open=True)  # a camera's pitch in degrees, down
 THREADS = {"rule": Rule(is_thread_setting, "must be all, free or a whole number >= 1")}  # offroad_path.utils.threads
 
 
@@ -69,14 +71,14 @@ class RigConfig:
 
 @dataclass
 class VehicleConfig:
-    width_m: float = MISSING
-    length_m: float = MISSING
-    wheelbase_m: float = MISSING
-    track_m: float = MISSING
-    camera_height_m: float = MISSING
-    camera_forward_m: float = MISSING  # camera ahead of the body centre
-    camera_pitch_deg: float = MISSING  # optical axis tilted down
-    max_steering_deg: float = MISSING
+    width_m: float = setting(positive())
+    length_m: float = setting(positive())
+    wheelbase_m: float = setting(positive())
+    track_m: float = setting(positive())
+    camera_height_m: float = setting(positive())
+    camera_forward_m: float = setting(FINITE)  # camera ahead of the body centre
+    camera_pitch_deg: float = setting(PITCH)  # optical axis tilted down
+    max_steering_deg: float = setting(between(0, 90, low_open=True, high_open=True))
 
 
 @dataclass
@@ -84,8 +86,9 @@ class SlipConfig:
     """Traction below the kinematic bicycle model's (offroad_path.world.slip): off by default."""
 
     enabled: bool = MISSING  # synthesize: the recorded steering is the input that made the motion under slip
-    factors: dict[str, float] = MISSING  # yaw-rate factor per surface class name; 1 where absent
-    patch_m: float = setting(positive())  # the factor's jitter is drawn once per square patch this wide
+    factors: dict[str, float] = setting(each(positive()))  # yaw-rate factor per surface class name; 1 where absent
+    # The factor's jitter is drawn once per square patch this wide (a grid over the whole world: smaller ones do not fit memory).
+    patch_m: float = setting(at_least(0.5))
     jitter: float = setting(between(0, 1, high_open=True))  # patch factors in [1 - jitter, 1 + jitter] times the surface's
     noise: float = setting(at_least(0))  # per-step (per-frame) noise of the factor, a standard deviation
 
@@ -163,8 +166,8 @@ class FootprintConfig:
     width_m: float | None = MISSING
     front_m: float | None = MISSING
     rear_m: float | None = MISSING
-    camera_height_m: float | None = MISSING
-    camera_pitch_deg: float | None = MISSING
+    camera_height_m: float | None = setting(positive())
+    camera_pitch_deg: float | None = setting(PITCH)
 
 
 @dataclass
@@ -499,7 +502,7 @@ class RosOutputConfig:
     steering: str = setting(one_of(("ackermann", "twist")))
     speed_mps: float = setting(at_least(0))
     camera_height_m: float | None = setting(positive())  # None: ingest.footprint's
-    camera_pitch_deg: float | None = MISSING  # of the raw left camera, down; None: ingest.footprint's
+    camera_pitch_deg: float | None = setting(PITCH)  # of the raw left camera, down; None: ingest.footprint's
     wheelbase_m: float = setting(positive())
     rear_axle_behind_camera_m: float = setting(at_least(0))
     lookahead_m: float = setting(positive())
@@ -592,9 +595,21 @@ def join_path(root: str, *parts: str) -> str:
     return os.path.normpath(os.path.join(os.path.expanduser(str(root)), *map(str, parts)))
 
 
+def steering_folder(slip: bool) -> str:
+    """The folder name of a PilotNet run: `steering`, or `steering_slip` for the slip targets (the
+    stage train_steering_slip), so that one never replaces the other's outputs by default."""
+    return "steering_slip" if slip else "steering"
+
+
+def steering_stage(slip: bool) -> str:
+    """The stage a PilotNet run is (its outputs' markers, its MLflow tag): train_steering or train_steering_slip."""
+    return f"train_{steering_folder(slip)}"
+
+
 def register_configs() -> None:
     OmegaConf.register_new_resolver("run_grid", run_grid, replace=True)
     OmegaConf.register_new_resolver("join", join_path, replace=True)
+    OmegaConf.register_new_resolver("steering_folder", steering_folder, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=Config)
     cs.store(group="world/rig", name="rig_schema", node=RigConfig, package="world.rig")

@@ -35,11 +35,13 @@ def outputs(cfg: DictConfig) -> Outputs:
 def check_policies(d: DictConfig, seed: int) -> None:
     """Every argument is known and every policy's checkpoint exists, before any world is built."""
     from offroad_path.driving.report import ARGUMENTS
-    from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, checkpoint_of
+    from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, checkpoint_of, pilotnet_checkpoint
 
     if unknown := sorted(set(d.arguments) - set(ARGUMENTS)):
         raise ValueError(f"drive.arguments: unknown argument {unknown[0]!r} (arguments: {', '.join(ARGUMENTS)})")
     for argument, names in d.arguments.items():
+        if not names:
+            raise ValueError(f"drive.arguments.{argument}: lists no policy (leave the argument out instead)")
         for name in names:
             base = name.removesuffix(TEMPORAL)
             if name != base and (base in BUILT_IN or base in d.pilotnets):
@@ -51,6 +53,8 @@ def check_policies(d: DictConfig, seed: int) -> None:
                     f"drive.arguments.{argument}: policy {name!r} needs {checkpoint}, which does not exist "
                     f"(policies: a run name of the train stage, that name{TEMPORAL}, or {known})"
                 )
+            if base in d.pilotnets:
+                pilotnet_checkpoint(checkpoint)  # a path network's checkpoint given as PilotNet: refused here, not after work
 
 
 @reads("drive", "world", "postprocess", "label", "mlflow", writes=outputs)
@@ -58,11 +62,12 @@ def run_drive(cfg: DictConfig) -> dict:
     # The networks and the renderer (torch among them) once the config and outputs are checked.
     from offroad_path.driving.loop import DriveLog
     from offroad_path.driving.report import ARGUMENTS, report
-    from offroad_path.driving.worlds import WorldJob, drive_params, drive_world, test_worlds
+    from offroad_path.driving.worlds import WorldJob, check_worlds, drive_params, drive_world, test_worlds
 
     drive = cfg.drive
     check_policies(drive, cfg.seed)
     worlds = test_worlds(Path(drive.synthetic_dir), drive.worlds)
+    check_worlds(worlds, cfg.world, drive)
     if len(worlds) * drive.starts_per_world < 2:
         raise ValueError(
             f"drive.starts_per_world: {len(worlds)} test world(s) x {drive.starts_per_world} start(s) is one drive; "

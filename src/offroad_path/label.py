@@ -102,10 +102,17 @@ def sharded(cfg: DictConfig) -> bool:
     return cfg.label.shards > 1
 
 
+def stage_name(cfg: DictConfig) -> str:
+    """What the output's marker names: a shard is not a label run, so neither replaces the other."""
+    return "label_shard" if sharded(cfg) else "label"
+
+
 def outputs(cfg: DictConfig) -> Outputs:
     label_cfg = cfg.label
     files = {} if sharded(cfg) else {"label.metrics_path": label_cfg.metrics_path}  # a shard's metrics stay in its folder
-    return Outputs("label", folders={"label.out_dir": label_cfg.out_dir}, files=files, inputs=[label_cfg.in_dir, label_cfg.merge_from])
+    return Outputs(
+        stage_name(cfg), folders={"label.out_dir": label_cfg.out_dir}, files=files, inputs=[label_cfg.in_dir, label_cfg.merge_from]
+    )
 
 
 @reads("label", "mlflow", writes=outputs)
@@ -126,7 +133,7 @@ def label(cfg: DictConfig) -> dict:
             check_inputs(open_sequence(root), cfg.label)
     with (
         stage_run(cfg, "label") if not sharded(cfg) else nullcontext() as run,
-        atomic_directory(out_dir, "label", key="label.out_dir") as tmp,
+        atomic_directory(out_dir, stage_name(cfg), key="label.out_dir") as tmp,
     ):
         if cfg.label.merge_from:
             for folder, summary in merged:

@@ -33,6 +33,7 @@ from offroad_path.postprocessing import PostprocessParams, postprocess
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.steering.pure_pursuit import GroundCamera
 from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.media import VideoFile, write_image
 from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.rules import ConfigValueError
 from offroad_path.utils.threads import set_threads
@@ -44,11 +45,11 @@ DEFAULT_FPS = 10.0
 WRITES_AHEAD = 4  # frames the writer thread may fall behind (their images wait in memory)
 
 
-def write_frame(tmp: Path, name: str, confidence: np.ndarray, shown: np.ndarray, video: cv2.VideoWriter | None) -> None:
+def write_frame(tmp: Path, name: str, confidence: np.ndarray, shown: np.ndarray, video: VideoFile | None) -> None:
     """One frame's outputs: confidence/NAME.png, overlay/NAME.png and the video's next frame."""
-    cv2.imwrite(str(tmp / "confidence" / f"{name}.png"), np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
+    write_image(tmp / "confidence" / f"{name}.png", np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
     shown = cv2.cvtColor(shown, cv2.COLOR_RGB2BGR)
-    cv2.imwrite(str(tmp / "overlay" / f"{name}.png"), shown)
+    write_image(tmp / "overlay" / f"{name}.png", shown)
     if video is not None:
         video.write(shown)
 
@@ -106,9 +107,7 @@ def run_predict(cfg: DictConfig) -> dict:
                 confidence = postprocess(confidence, frame.depth, params)
             shown = overlay(frame.image, confidence > p.threshold, outline=False)
             if source.kind != "folder" and video is None:
-                video = cv2.VideoWriter(str(tmp / "overlay.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), fps, shown.shape[1::-1])
-                if not video.isOpened():
-                    raise ValueError(f"{tmp / 'overlay.mp4'}: OpenCV cannot write an MP4 here")
+                video = VideoFile(tmp / "overlay.mp4", fps, shown.shape[1::-1])
             pending.append(writer.submit(write_frame, tmp, frame.name, confidence, shown, video))
             if bag is not None:
                 bag.write(frame.header, confidence, cv2.cvtColor(shown, cv2.COLOR_RGB2BGR))
@@ -118,7 +117,7 @@ def run_predict(cfg: DictConfig) -> dict:
         for write in pending:
             write.result()
         if video is not None:
-            video.release()
+            video.close()  # OSError when the file does not hold every frame (a full disk)
     seconds = time.perf_counter() - start
     summary = {
         "frames": frames,

@@ -32,7 +32,7 @@ from omegaconf.errors import OmegaConfBaseException
 from offroad_path.config import CONF_DIR, register_configs, validate_config
 from offroad_path.errors import EXIT_BAD_INPUT, clear_errors, missing_extra, one_line
 from offroad_path.utils.atomic import remove_unfinished
-from offroad_path.utils.outputs import Outputs, claimed, release_locks
+from offroad_path.utils.outputs import Outputs, check_outputs, claimed, release_locks
 from offroad_path.utils.parallel import stop_workers
 from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.threads import set_threads
@@ -66,11 +66,20 @@ def reads(*groups: str, writes: Callable[[DictConfig], Outputs] | None = None) -
     `writes` gives, from that config, the outputs the run writes and every input it reads: they are
     checked against the output rule (utils.outputs) and locked for the run, before any work."""
 
+    # Only a training stage (one that reads `trainer`) runs as several ranks: the rank variables
+    # of a SLURM allocation or a torchrun shell mean nothing to the others.
+    trains = "trainer" in groups
+
     def declare(stage: Stage) -> Stage:
         @functools.wraps(stage)
         def run(cfg: DictConfig) -> Any:
             own = stage_config(cfg, groups, stage.__name__)
-            if writes is None or not is_global_zero():  # another rank of a DDP run: it writes nothing
+            if writes is None:
+                return stage(own)
+            if trains and not is_global_zero():
+                # Another rank of a distributed training run: rank 0 holds the locks and writes the
+                # outputs; this one writes nothing, but its outputs obey the same rule.
+                check_outputs(writes(own))
                 return stage(own)
             with claimed(writes(own)):
                 return stage(own)
@@ -92,6 +101,12 @@ def _stop(signum: int, frame: Any) -> None:
     remove_unfinished()
     release_locks()
     os._exit(128 + signum)
+
+
+def stop_cleanly_on_sigterm() -> None:
+    """Install _stop for SIGTERM: every stage's command does; so do the project's other commands
+    that write outputs (labelling.inspect)."""
+    signal.signal(signal.SIGTERM, _stop)
 
 
 def objective(result: Any, metric: str | None) -> float | None:
@@ -158,7 +173,7 @@ def hydra_stage(stage: Stage) -> Callable[[], None]:
     def main(cfg: DictConfig) -> float | None:
         # A stop (kill, `dvc` interrupted) deletes the temporary folders of unfinished outputs
         # instead of leaving them beside the outputs.
-        signal.signal(signal.SIGTERM, _stop)
+        stop_cleanly_on_sigterm()
         result = run_stage(stage, cfg)
         with clear_errors():
             return objective(result, cfg.get("optimized_metric"))

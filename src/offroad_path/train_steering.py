@@ -2,10 +2,10 @@
 of the training sequences, tested on the path split's held-out stretches (see offroad_path.steering).
 
     python -m offroad_path.train_steering [steering.lr=2e-4] [steering.max_epochs=30]
-    python -m offroad_path.train_steering steering.slip=true steering.out_dir=data/steering_slip ...  # on slippery ground
+    python -m offroad_path.train_steering steering.slip=true  # slippery ground: data/steering_slip/seed0 (train_steering_slip)
 
-Writes steering.out_dir (data/steering): checkpoints/best.ckpt, metrics.json, predictions.csv (true
-and predicted angle per test frame), error_by_magnitude.csv, scatter.png (the thesis's Fig. 5.4);
+Writes steering.out_dir (data/steering/seed<seed>; steering_slip/ with slip): checkpoints/best.ckpt,
+metrics.json, predictions.csv (true and predicted angle per test frame), error_by_magnitude.csv, scatter.png (the thesis's Fig. 5.4);
 steering.metrics_path for `dvc metrics show`; steering.plots_path for `dvc plots show`; an MLflow run.
 """
 
@@ -15,9 +15,11 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from offroad_path.config import steering_stage
 from offroad_path.data.labels import label_run_folders
 from offroad_path.data.manifest import manifest_folders
 from offroad_path.stage import hydra_stage, reads
+from offroad_path.training.outputs import logger_folder
 from offroad_path.utils.outputs import Outputs
 
 
@@ -25,7 +27,14 @@ def outputs(cfg: DictConfig) -> Outputs:
     steering = cfg.steering
     inputs = [*label_run_folders(steering.labels_dir), steering.split_dir, *manifest_folders(Path(steering.split_dir) / "train.csv")]
     files = {"steering.metrics_path": steering.metrics_path, "steering.plots_path": steering.plots_path}
-    return Outputs("train_steering", folders={"steering.out_dir": steering.out_dir}, files=files, inputs=inputs)
+    # Two stages in dvc.yaml (train_steering, train_steering_slip): neither replaces the other's outputs.
+    return Outputs(
+        steering_stage(steering.slip),
+        folders={"steering.out_dir": steering.out_dir},
+        files=files,
+        inputs=inputs,
+        shared=logger_folder(cfg),
+    )
 
 
 @reads("steering", "split", "world", "trainer", "callbacks", "logger", "mlflow", writes=outputs)

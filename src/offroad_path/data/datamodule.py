@@ -9,6 +9,7 @@ from torch.utils.data import DataLoader
 
 from offroad_path.data.dataset import Augmentation, EpochSampler, ManifestDataset, transforms
 from offroad_path.data.manifest import Sample, read_manifest
+from offroad_path.errors import InputError
 
 
 class OffroadDataModule(L.LightningDataModule):
@@ -42,6 +43,10 @@ class OffroadDataModule(L.LightningDataModule):
         for name in ("train", "val", "test"):
             if name not in self.samples:
                 self.samples[name] = read_manifest(self.split_dir / f"{name}.csv", check_files=True)
+        if not self.samples["train"]:  # a split of too little driving: nothing to learn from, a run that would report nothing
+            raise InputError(
+                self.split_dir / "train.csv", "lists no training sample (too little driving for the split's blocks: see split.block_m)"
+            )
 
     def _loader(self, name: str, train: bool) -> DataLoader:
         hp = self.hparams

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from offroad_path.errors import InputError
 from offroad_path.geometry.path import distance_along
+from offroad_path.labelling.shards import SHARD_FILE
 from offroad_path.sequence.poses import read_poses
 from offroad_path.sequence.reader import Sequence, open_sequence
 
@@ -45,6 +47,10 @@ def read_label_run(labels_dir: Path) -> list[LabelledSequence]:
     summary_path = labels_dir / "summary.json"
     if not summary_path.is_file():
         raise FileNotFoundError(f"{summary_path}: missing (run the label stage first)")
+    if (labels_dir / SHARD_FILE).is_file():
+        raise InputError(
+            labels_dir, "is one shard of a sharded label run, not a whole run: merge the shards first (label.merge_from=<their folder>)"
+        )
     out = []
     for entry in json.loads(summary_path.read_text())["sequences"]:
         name, seq = entry["name"], open_sequence(entry["root"])

@@ -6,6 +6,7 @@ first world, a video per policy). One world is one job of the drive stage's work
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -18,10 +19,13 @@ from offroad_path.driving.course import Course
 from offroad_path.driving.loop import DriveLog, LoopSettings, Setup, drive
 from offroad_path.driving.policies import OraclePolicy, PathPolicy, PilotNetPolicy, Policy, StereoRig, StraightPolicy
 from offroad_path.driving.vehicle import Vehicle
+from offroad_path.errors import InputError
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.postprocessing import PostprocessParams
 from offroad_path.sequence import meta
-from offroad_path.world.record import rebuild_world
+from offroad_path.utils.media import VideoFile
+from offroad_path.utils.rules import ConfigValueError
+from offroad_path.world.record import check_rendered_with, rebuild_world
 from offroad_path.world.render import PinholeCamera
 from offroad_path.world.scene import World, vehicle_geometry
 from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip
@@ -38,18 +42,42 @@ class TestWorld:
     name: str
     folder: str
     seed: int
+    recorded: dict  # its meta.json
 
 
 def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
     """The held-out test worlds (meta.json's "split": "test"), in name order, the first `limit`."""
     found = []
     for meta_path in sorted(synthetic_dir.glob("*/meta.json")):
-        recorded = json.loads(meta_path.read_text())
+        try:
+            recorded = json.loads(meta_path.read_text())
+        except (OSError, ValueError) as e:
+            raise InputError(meta_path, f"cannot be read as JSON ({type(e).__name__}: {e})") from e
+        if not isinstance(recorded, dict):
+            raise InputError(meta_path, "is not a JSON object")
         if meta.held_out(recorded, meta_path):
-            found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), int(recorded["seed"])))
+            if not isinstance(recorded.get("seed"), int):
+                raise InputError(
+                    meta_path, 'has no integer "seed": the drive stage rebuilds a test world from the seed synthesize recorded'
+                )
+            found.append(TestWorld(meta_path.parent.name, str(meta_path.parent), recorded["seed"], recorded))
     if not found:
         raise ValueError(f'{synthetic_dir}: no held-out test world (a meta.json with "split": "test"); run synthesize')
     return found[:limit] if limit else found
+
+
+def check_worlds(worlds: list[TestWorld], world_cfg, d) -> None:
+    """Before any world is built: each was rendered with `world_cfg` (world.record.check_rendered_with),
+    and its drive is long enough for d.length_m of route with the pursuit's look-ahead beyond it."""
+    for w in worlds:
+        check_rendered_with(world_cfg, Path(w.folder) / "meta.json", w.recorded)
+    shortest = min(worlds, key=lambda w: float(w.recorded.get("distance_m", math.inf)))
+    room = float(shortest.recorded.get("distance_m", math.inf)) - END_MARGIN_M
+    if d.length_m > room:
+        raise ConfigValueError(
+            f"drive.length_m={d.length_m:g}: longer than the route test world {shortest.name} leaves ({room:.1f} m: its "
+            f"{shortest.recorded['distance_m']:.1f} m drive less {END_MARGIN_M:g} m of look-ahead)"
+        )
 
 
 def checkpoint_of(name: str, d, seed: int) -> Path | None:
@@ -61,6 +89,19 @@ def checkpoint_of(name: str, d, seed: int) -> Path | None:
     return Path(d.runs_dir) / name.removesuffix(TEMPORAL) / f"seed{seed}" / "checkpoints" / "best.ckpt"
 
 
+PILOTNET_KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")
+
+
+def pilotnet_checkpoint(path: Path) -> dict:
+    """A train_steering checkpoint (weights_only); CheckpointError naming the file for any other."""
+    from offroad_path.training.checkpoints import CheckpointError, load_checkpoint
+
+    saved = load_checkpoint(path)
+    if missing := [k for k in PILOTNET_KEYS if k not in saved["hyper_parameters"]]:
+        raise CheckpointError(f"{path}: not a PilotNet checkpoint of train_steering (no {', '.join(missing)} among its hyper-parameters)")
+    return saved
+
+
 def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
     if name == "oracle":
         return OraclePolicy(d.lookahead_m)
@@ -68,11 +109,11 @@ def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
         return StraightPolicy()
     if name in d.pilotnets:
         from offroad_path.steering.task import SteeringTask
-        from offroad_path.training.checkpoints import load_checkpoint, load_weights
+        from offroad_path.training.checkpoints import load_weights
 
-        saved = load_checkpoint(checkpoint_of(name, d, seed))  # weights_only
+        saved = pilotnet_checkpoint(checkpoint_of(name, d, seed))
         hp = saved["hyper_parameters"]
-        task = SteeringTask(**{k: hp[k] for k in ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")})
+        task = SteeringTask(**{k: hp[k] for k in PILOTNET_KEYS})
         load_weights(task, checkpoint_of(name, d, seed), saved)
         return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]), name)
     from offroad_path.inference.runners import TorchModel
@@ -154,12 +195,10 @@ def _yaw_factor(world: World, slip: Slip, seed: int, start: int):
 
 
 def _write_video(log: DriveLog, path: Path, fps: float) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
     h, w = log.frames[0].shape[:2]
-    video = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-    for image in log.frames:
-        video.write(cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-    video.release()
+    with VideoFile(path, fps, (w, h)) as video:
+        for image in log.frames:
+            video.write(cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
     log.frames = []  # the frames are not sent back to the stage
 
 

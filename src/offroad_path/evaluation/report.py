@@ -16,6 +16,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.loading import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
+from offroad_path.errors import InputError
 from offroad_path.evaluation.figures import save_png
 from offroad_path.evaluation.metrics import counts, mean_path, precision_recall_curve
 from offroad_path.evaluation.tables import csv_text
@@ -57,6 +58,11 @@ class TestSet:
                     ("no", Path(e.runs_dir) / folder / "predictions" / "manifest.csv", "train"),
                     ("yes", Path(e.postprocessed_dir) / folder / "manifest.csv", "postprocess"),
                 ):
+                    if not manifest.is_file():
+                        raise InputError(
+                            manifest,
+                            f"missing: evaluate.seeds lists seed {seed}; run {made_by} seed={seed} for {run}, or list only seeds trained",
+                        )
                     rows = read_predictions_manifest(manifest, made_by)
                     if samples and [s for s, _ in rows] != samples:
                         raise ValueError(f"{manifest}: lists other test samples than the runs before it (retrain on the same split)")

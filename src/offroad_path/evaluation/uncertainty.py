@@ -17,6 +17,7 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
+from offroad_path.errors import InputError
 from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, paired_interval
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
@@ -28,6 +29,8 @@ def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> li
     """Each sample's block of driving, as the split formed them: (sequence, metres along its
     label run's poses // block_m); a mirrored copy is in its frame's block."""
     travelled = {run.name: run.distance() for run in read_label_run(labels_dir)}
+    if missing := sorted({s.sequence for s in samples} - set(travelled)):
+        raise InputError(labels_dir, f"holds no sequence {missing[0]} of the test manifest: give the label run the split was made from")
     return [block_of(s.sequence, travelled[s.sequence][s.f0], block_m) for s in samples]
 
 

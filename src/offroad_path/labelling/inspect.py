@@ -14,6 +14,7 @@ segment, label coverage, the footprint check of labelling/quality.py) and checks
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import sys
@@ -23,11 +24,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.errors import CommandParser, InputError, clear_errors, missing_extra
+from offroad_path.errors import CommandParser, InputError, clear_errors, missing_extra, one_line, positive_int
 from offroad_path.labelling.footprint import VehicleFootprint, footprint_for, swept_polygons
 from offroad_path.labelling.quality import FootprintCheck, LabelRun, ratio_curve, summary_figure
 from offroad_path.sequence.reader import Sequence, find_sequences, open_sequence
+from offroad_path.stage import stop_cleanly_on_sigterm
 from offroad_path.utils.atomic import atomic_directory
+from offroad_path.utils.outputs import Outputs, claimed
 
 log = logging.getLogger("offroad_path.inspect")
 MAX_POINT_DEPTH_M = 30.0
@@ -158,12 +161,25 @@ def inspect(labels: Path, recording: Path | None, out: Path, every: int = 4) -> 
     sequences = recordings_by_name(recording) if recording is not None else {}
     if recording is not None and (missing := sorted(set(runs) - set(sequences))):
         raise InputError(recording, f"holds no sequence {', '.join(missing)} of {labels}")
+    for name, run in runs.items():
+        frames = len(run.poses) if run.poses is not None else 1 + max((int(s["fn"]) for s in run.segments), default=0)
+        if name in sequences and len(sequences[name]) < frames:
+            raise InputError(
+                sequences[name].root,
+                f"has {len(sequences[name])} frames, fewer than the {frames} of {run.folder}: not the recording it labelled",
+            )
     checks = {}
-    with atomic_directory(out, "inspect", key="--out") as tmp:
+    with (
+        claimed(Outputs("inspect", folders={"--out": out}, inputs=[labels, recording])),
+        atomic_directory(out, "inspect", key="--out") as tmp,
+    ):
         for name, run in runs.items():
             seq = sequences.get(name)
             it = Inspected(name, run, seq, footprint_for(seq, {}) if seq is not None else None, every)
-            log_sequence(rr, tmp / f"{name}.rrd", it)
+            try:
+                log_sequence(rr, tmp / f"{name}.rrd", it)
+            except RuntimeError as e:  # rerun's writer: a full disk, a folder that may not be written
+                raise OSError(errno.EIO, f"the recording could not be written ({one_line(e)})", str(tmp / f"{name}.rrd")) from e
             if it.footprint is not None:
                 checks[name] = it.check.verdict(it.footprint.camera_height_m)
                 checks[name]["curve_depth"], checks[name]["curve_ratio"] = ratio_curve(it.check, np.arange(2.0, 16.0, 1.0))
@@ -180,8 +196,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("labels", type=Path, help="the label stage's output folder (label.out_dir)")
     parser.add_argument("--recording", type=Path, help="the recordings it labelled (label.in_dir): images, point clouds, footprint check")
     parser.add_argument("--out", type=Path, help="where the .rrd files and summary go (default: LABELS_inspect beside LABELS)")
-    parser.add_argument("--points-every", type=int, default=4, help="the point cloud takes every N-th pixel of each row and column")
+    parser.add_argument(
+        "--points-every", type=positive_int, default=4, help="the point cloud takes every N-th pixel of each row and column"
+    )
     args = parser.parse_args(argv)
+    stop_cleanly_on_sigterm()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     with clear_errors():
         out = args.out or args.labels.parent / f"{args.labels.name}_inspect"

@@ -9,7 +9,6 @@ from collections import Counter
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from offroad_path.config import OdometryConfig
@@ -22,6 +21,7 @@ from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import Sequence
+from offroad_path.utils.media import write_image
 
 log = logging.getLogger(__name__)
 
@@ -110,8 +110,8 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
             report.kept, report.reason = False, "the footprint falls outside the image"
         else:
             name = f"{f0:06d}.png"
-            cv2.imwrite(str(out_dir / "label" / name), mask)
-            cv2.imwrite(str(out_dir / "disparity" / name), encode_disparity(disparity))
+            write_image(out_dir / "label" / name, mask)
+            write_image(out_dir / "disparity" / name, encode_disparity(disparity))
         reports.append(report)
 
     _write_csv(out_dir / "report.csv", [asdict(r) for r in reports], [f.name for f in fields(SegmentReport)])

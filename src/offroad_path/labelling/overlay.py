@@ -14,6 +14,7 @@ import cv2
 
 from offroad_path.errors import CommandParser, clear_errors
 from offroad_path.sequence.reader import open_sequence
+from offroad_path.utils.media import write_image
 from offroad_path.viz import overlay
 
 
@@ -35,7 +36,7 @@ def main(argv: list[str] | None = None) -> None:
             raise ValueError(f"{path}: cannot be read as a label")
         image = seq.load_left(int(path.stem))
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        cv2.imwrite(str(args.out), overlay(image, mask)[:, :, ::-1])
+        write_image(args.out, overlay(image, mask)[:, :, ::-1])
 
 
 if __name__ == "__main__":

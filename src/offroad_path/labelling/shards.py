@@ -45,6 +45,19 @@ def shard_record(label: DictConfig, names: list[str]) -> str:
     return json.dumps({"shard": label.shard, "shards": label.shards, "sequences": names, "config": config_digest(label)}, indent=2) + "\n"
 
 
+def _shard_record(path: Path) -> dict:
+    """A shard.json with the keys the merge reads; InputError naming the file otherwise."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise InputError(path, f"cannot be read as a shard record ({type(e).__name__}: {e})") from e
+    kinds = {"shard": int, "shards": int, "sequences": list, "config": str}
+    if not isinstance(record, dict) or (bad := [k for k, kind in kinds.items() if not isinstance(record.get(k), kind)]):
+        wrong = ", ".join(bad) if isinstance(record, dict) else "all"
+        raise InputError(path, f"is not a shard record: {wrong} missing or of the wrong type (written by label with label.shards > 1)")
+    return record
+
+
 def read_shards(label: DictConfig, names: list[str]) -> list[tuple[Path, dict]]:
     """(folder, summary of one sequence) for every sequence of `names`, in that order, from the
     shard folders under label.merge_from; InputError naming the folder when they do not make
@@ -55,7 +68,7 @@ def read_shards(label: DictConfig, names: list[str]) -> list[tuple[Path, dict]]:
         raise InputError(root, f"holds no shard folder (a label.out_dir of a run with label.shards > 1, with {SHARD_FILE})")
     digest, found, seen = config_digest(label), {}, set()
     for folder in folders:
-        record = json.loads((folder / SHARD_FILE).read_text())
+        record = _shard_record(folder / SHARD_FILE)
         if record["config"] != digest:
             raise InputError(folder, f"was labelled with another label config (digest {record['config']}, this one {digest})")
         if record["shard"] in seen or record["shards"] != len(folders):

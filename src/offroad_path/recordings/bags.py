@@ -105,7 +105,7 @@ class Bag:
                 f"holds {len(images)} image topics with a CameraInfo beside them, not one stereo pair "
                 f"(its image topics: {listing}); give ingest.topics.left and ingest.topics.right",
             )
-        tx = [float(self.first(info_topic_for(t), (INFO_TYPE,), "CameraInfo").p[3]) for t in images]
+        tx = [float(camera_info_dict(self.first(info_topic_for(t), (INFO_TYPE,), "CameraInfo"))["p"][3]) for t in images]  # ROS 1: P
         if tx[0] == tx[1]:
             raise InputError(
                 self.path,

@@ -9,8 +9,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.errors import InputError
+from offroad_path.errors import InputError, one_line
 from offroad_path.recordings.calibration import CameraModel, StereoRig
+from offroad_path.sequence.reader import check_pixels, png_size
 
 MIN_VIEWS = 6
 
@@ -53,16 +54,28 @@ class Calibration:
     views: int
 
 
+def read_view(path: Path) -> np.ndarray:
+    """A calibration view in grey; InputError naming the file when it cannot be decoded or (a PNG)
+    declares more pixels than a sequence may have (a decompression bomb is not decoded)."""
+    if path.suffix.lower() == ".png":
+        check_pixels(path, *png_size(path))
+    try:
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    except cv2.error as e:  # OpenCV's own size limit, among others
+        raise InputError(path, f"cannot be decoded as an image ({one_line(e)})") from e
+    if image is None:
+        raise InputError(path, "cannot be decoded as an image")
+    return image
+
+
 def calibrate_stereo(left: list[Path], right: list[Path], board: Board, out: Path) -> Calibration:
     """Calibrate from image pairs (same names in both lists' order); views where either camera
     misses the board are skipped."""
     object_points, left_points, right_points, size = [], [], [], None
     corners = board.corners_3d()
     for lp, rp in zip(left, right, strict=True):
-        images = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in (lp, rp)]
+        images = [read_view(p) for p in (lp, rp)]
         for p, image in zip((lp, rp), images, strict=True):
-            if image is None:
-                raise InputError(p, "cannot be decoded as an image")
             if size is not None and image.shape[::-1] != size:
                 raise InputError(p, f"is {image.shape[1]}x{image.shape[0]}, the first view {size[0]}x{size[1]}")
             size = image.shape[::-1]

@@ -21,6 +21,7 @@ from offroad_path.recordings.sync import Subsampler
 from offroad_path.sequence.meta import FOOTPRINT, GENERATOR, INGESTED
 from offroad_path.sequence.png import FAST_PNG
 from offroad_path.sequence.poses import poses_to_text
+from offroad_path.utils.media import write_image
 
 log = logging.getLogger(__name__)
 CHECKED_PAIRS = 8  # pairs spread over the drive whose epipolar error is measured
@@ -46,7 +47,7 @@ def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) ->
     for t, raw_left, raw_right in source.pairs(sampler.keep):
         name = f"{len(times):06d}.png"
         for sub, image in zip(("image_l", "image_r"), rectifier(raw_left, raw_right), strict=True):
-            cv2.imwrite(str(out / sub / name), image, FAST_PNG)
+            write_image(out / sub / name, image, FAST_PNG)
         times.append(t)
     if len(times) < 2:
         raise InputError(
@@ -117,4 +118,4 @@ def _epipolar(out: Path, count: int, c: DictConfig) -> float | None:
 
 def _preview(out: Path, count: int) -> None:
     sheet = contact_sheet([_read_pair(out, i) for i in _spread(count, PREVIEW_PAIRS)])
-    cv2.imwrite(str(out / "preview.jpg"), sheet, [cv2.IMWRITE_JPEG_QUALITY, 85])
+    write_image(out / "preview.jpg", sheet, [cv2.IMWRITE_JPEG_QUALITY, 85])

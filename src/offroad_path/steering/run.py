@@ -14,6 +14,7 @@ import torch
 from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
+from offroad_path.config import steering_stage
 from offroad_path.data.labels import read_label_run
 from offroad_path.sequence import meta
 from offroad_path.steering.dataset import SteeringDataModule
@@ -88,23 +89,24 @@ def fit_steering(cfg: DictConfig) -> dict:
         scatter_plot(true, predicted, tmp / "scatter.png")
         return {**steering_metrics(true, predicted, steering.lock_deg, steering.steering_ratio), "by_true_magnitude": bins}
 
+    stage = steering_stage(steering.slip)
     spec = RunSpec(
-        stage="train_steering",
+        stage=stage,
         out_dir=Path(steering.out_dir),
         out_key="steering.out_dir",
-        key=run_identity(cfg, "train_steering", settings, files),
+        key=run_identity(cfg, stage, settings, files),
         max_epochs=steering.max_epochs,
         patience=steering.patience,
         write_more=write_predictions,
     )
-    tags = {"stage": "train_steering", "model": "pilotnet", "slip": str(steering.slip).lower()}
+    tags = {"stage": stage, "model": "pilotnet", "slip": str(steering.slip).lower()}
     logger = training_logger(cfg, "train_steering pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
     results = fit(cfg, task, data, spec, logger)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
     true, predicted = scored["true"], scored["predicted"]
-    write_text_atomic(steering.metrics_path, json.dumps(metrics, indent=2) + "\n", "train_steering")
+    write_text_atomic(steering.metrics_path, json.dumps(metrics, indent=2) + "\n", stage)
     pairs = "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(true, predicted, strict=True))
-    write_text_atomic(steering.plots_path, "truth,prediction\n" + pairs, "train_steering")
+    write_text_atomic(steering.plots_path, "truth,prediction\n" + pairs, stage)
     if logger is not None:
         logger.log_metrics({f"test/{k}": v for k, v in metrics.items() if isinstance(v, float)})
     if isinstance(logger, MLFlowLogger):

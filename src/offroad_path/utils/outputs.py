@@ -29,6 +29,9 @@ class Outputs:
     folders: dict[str, str | Path] = field(default_factory=dict)
     files: dict[str, str | Path] = field(default_factory=dict)
     inputs: Iterable[str | Path | None] = ()
+    # Folders the run adds files to without owning them (a file logger's save_dir, shared by every
+    # run): they may not overlap an input or an output, and must be writable; never replaced or locked.
+    shared: dict[str, str | Path | None] = field(default_factory=dict)
 
 
 def _related(a: Path, b: Path) -> bool:
@@ -72,6 +75,20 @@ def check_outputs(outputs: Outputs) -> None:
                 raise UnsafeOutputError(f"{key}={path}: overlaps {other_key}={other}, another output of this stage. Choose another {key}")
         (check_output_dir if is_folder else _check_file)(path, key, outputs.stage)
         _writable_place(path, key)
+    for key, place in outputs.shared.items():
+        if place not in (None, ""):
+            _check_shared(Path(place), key, inputs, declared)
+
+
+def _check_shared(place: Path, key: str, inputs: list[tuple[str, Path]], declared: list[tuple[str, Path, bool]]) -> None:
+    resolved = place.resolve()
+    for shown, source in inputs:
+        if _related(resolved, source):
+            raise UnsafeOutputError(f"{key}={place}: overlaps the input {shown}; the run would write into it. Choose another {key}")
+    for other_key, other, _ in declared:
+        if _related(resolved, other.resolve()):
+            raise UnsafeOutputError(f"{key}={place}: overlaps {other_key}={other}, which this run replaces. Choose another {key}")
+    _writable_place(resolved / "x", key)
 
 
 def lock_path(output: Path) -> Path:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from omegaconf import MISSING, DictConfig, OmegaConf
@@ -62,9 +62,10 @@ def numbers(count: int) -> dict:
 
 
 def each(inner: dict) -> dict:
-    """The inner rule on every item of a list (choices listed as the inner rule lists them)."""
+    """The inner rule on every item of a list, or every value of a mapping (choices listed as the
+    inner rule lists them)."""
     check: Rule = inner["rule"]
-    return inner | {"rule": Rule(lambda v: all(check.test(x) for x in v), check.says)}
+    return inner | {"rule": Rule(lambda v: all(check.test(x) for x in (v.values() if isinstance(v, Mapping) else v)), check.says)}
 
 
 def setting(rules: dict | None = None) -> Any:

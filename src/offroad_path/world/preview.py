@@ -7,11 +7,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from offroad_path.errors import CommandParser, clear_errors
 from offroad_path.sequence.reader import Sequence, find_sequences, open_sequence
+from offroad_path.utils.media import write_image
 from offroad_path.viz import colour_depth, colour_semantic
 
 
@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> None:
     with clear_errors():
         sheet = contact_sheet(args.sequences, args.rows)
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        cv2.imwrite(args.out, sheet[:, :, ::-1])
+        write_image(args.out, sheet[:, :, ::-1])
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from offroad_path.sequence import meta as meta_keys
 from offroad_path.sequence.calibration import StereoCalibration
 from offroad_path.sequence.png import FAST_PNG
 from offroad_path.sequence.poses import poses_to_text
+from offroad_path.utils.media import write_image
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.conditions import conditions_csv, frame_conditions
@@ -64,10 +65,10 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         name = f"{k:06d}.png"
         left = render_view(world, camera, pose, cfg.max_distance_m, rays)
         right = render_view(world, camera, pose @ to_right, cfg.max_distance_m, rays)
-        cv2.imwrite(str(out_dir / "image_l" / name), left.image[:, :, ::-1], FAST_PNG)
-        cv2.imwrite(str(out_dir / "image_r" / name), right.image[:, :, ::-1], FAST_PNG)
-        cv2.imwrite(str(out_dir / "depth" / name), encode_depth(left.depth), FAST_PNG)
-        cv2.imwrite(str(out_dir / "semantic" / name), left.semantic, SEMANTIC_PNG)
+        write_image(out_dir / "image_l" / name, left.image[:, :, ::-1], FAST_PNG)
+        write_image(out_dir / "image_r" / name, right.image[:, :, ::-1], FAST_PNG)
+        write_image(out_dir / "depth" / name, encode_depth(left.depth), FAST_PNG)
+        write_image(out_dir / "semantic" / name, left.semantic, SEMANTIC_PNG)
         class_pixels += np.bincount(left.semantic.ravel(), minlength=len(CLASS_NAMES))
 
     first_inv = np.linalg.inv(world.poses[0])
@@ -103,6 +104,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         "world_frame": "x right, y down (gravity), z forward at the start",
         "distance_m": distance,
         "frames": len(world.poses),
+        "world": world_settings(cfg),  # the drive stage and the slip targets rebuild the world from these and the seed
     } | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {})
     if world.slip is not None:  # only then: a world without slip keeps today's meta.json byte for byte
         meta["steering"] = (
@@ -132,10 +134,40 @@ def record_sequences(cfg: WorldConfig, drives: list[tuple[str, int, bool]], out_
     return summaries
 
 
+def world_settings(cfg: WorldConfig) -> dict:
+    """What draws a world and its camera: the world config less `slip` (which changes only the
+    recorded steering, and which steering_under_slip and drive turn on over rendered worlds)."""
+    settings = OmegaConf.to_container(cfg, resolve=True) if OmegaConf.is_config(cfg) else asdict(cfg)
+    return {k: v for k, v in settings.items() if k != "slip"}
+
+
+def _flat(settings: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in settings.items():
+        out |= _flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {f"{prefix}{key}": value}
+    return out
+
+
+def check_rendered_with(cfg: WorldConfig, meta_path: Path, recorded: dict) -> None:
+    """ValueError naming meta.json and the first differing key when a rendered sequence was drawn
+    with world settings other than `cfg`'s (meta.json's "world"; sequences rendered before it was
+    recorded are checked by rebuild_world's drive length only)."""
+    if "world" not in recorded:
+        return
+    now, then = _flat(world_settings(cfg)), _flat(recorded["world"])
+    if differ := sorted(k for k in now.keys() | then.keys() if now.get(k) != then.get(k)):
+        shown = "; ".join(f"world.{k}={now.get(k)!r} (rendered with {then.get(k)!r})" for k in differ[:3])
+        more = f" and {len(differ) - 3} more" if len(differ) > 3 else ""
+        raise ValueError(
+            f"{meta_path}: rendered with other world settings than this config's: {shown}{more}; use those or rerun synthesize"
+        )
+
+
 def rebuild_world(cfg: WorldConfig, folder: Path) -> World:
     """The world a rendered sequence (folder, with its meta.json) was drawn from, rebuilt from its seed
     with `cfg`; a ValueError naming the folder when cfg is not the config it was rendered with."""
     meta = json.loads((folder / "meta.json").read_text())
+    check_rendered_with(cfg, folder / "meta.json", meta)
     world = build_world(cfg, int(meta["seed"]))
     if not math.isclose(path_length(world.poses), float(meta["distance_m"]), rel_tol=1e-9):
         raise ValueError(
