@@ -12,7 +12,9 @@ job would. `--parse` prints the table of a log written before. With the run's ML
 (`--mlflow-db`, the default mlflow.db when it exists), each stage that logs a run is split into its
 start-up (the process's imports, Hydra, data set-up and MLflow's store, until its run starts), the
 run itself, and its end (the run's end to the next stage's start: process exit, DVC hashing and
-caching its outputs).
+caching its outputs). Each stage's peak resident memory is the largest high-water mark (VmHWM) of any
+process under `dvc repro` while the stage runs, read from /proc every 0.2 s (a rise in a process's
+last 0.2 s can be missed); it is written into the log as `#peak` lines.
 """
 
 from __future__ import annotations
@@ -22,15 +24,55 @@ import re
 import sqlite3
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 BUSY = "import torch\nx = torch.randn(1024, 1024)\nwhile True:\n    x = (x @ x).clamp(-1, 1)\n"
 STAGE = re.compile(r"^Running stage '([^']+)'")
+PEAK = re.compile(r"^#peak (\S+) (\d+)$")
+
+
+def descendants(root: int) -> list[int]:
+    """Every process below `root` (Linux /proc)."""
+    children: dict[int, list[int]] = {}
+    for status in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = status.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(fields[1]), []).append(int(status.parent.name))
+    found, todo = [], [root]
+    while todo:
+        found += (kids := children.get(todo.pop(), []))
+        todo += kids
+    return found
+
+
+def high_water_kb(pid: int) -> int:
+    try:
+        return next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines() if line.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        return 0
+
+
+class PeakMemory(threading.Thread):
+    """Polls the peak resident memory of every process under `root`, per stage (`stage` set from outside)."""
+
+    def __init__(self, root: int):
+        super().__init__(daemon=True)
+        self.root, self.stage, self.peaks, self.done = root, "", {}, threading.Event()
+
+    def run(self) -> None:
+        while not self.done.wait(0.2):
+            if self.stage:
+                top = max(high_water_kb(pid) for pid in [self.root, *descendants(self.root)])
+                self.peaks[self.stage] = max(self.peaks.get(self.stage, 0), top)
 
 
 def stage_seconds(lines: list[tuple[float, str]]) -> list[tuple[str, float]]:
     """(stage, seconds) in the order run: from its 'Running stage' line to the next one or the end."""
+    lines = [(when, text) for when, text in lines if not text.startswith("#peak")]
     starts = [(when, m.group(1)) for when, text in lines if (m := STAGE.match(text))]
     ends = [when for when, _ in starts[1:]] + [lines[-1][0]]
     return [(name, end - start) for (start, name), end in zip(starts, ends, strict=True)]
@@ -38,11 +80,16 @@ def stage_seconds(lines: list[tuple[float, str]]) -> list[tuple[str, float]]:
 
 def table(lines: list[tuple[float, str]]) -> str:
     grouped: dict[str, list[float]] = {}
+    peaks: dict[str, int] = {}
+    for _, text in lines:
+        if m := PEAK.match(text):
+            peaks[m.group(1).split("@")[0]] = max(peaks.get(m.group(1).split("@")[0], 0), int(m.group(2)))
     for name, seconds in stage_seconds(lines):
         grouped.setdefault(name.split("@")[0], []).append(seconds)
-    rows = ["| stage | runs | seconds | each |", "| --- | --- | --- | --- |"]
+    rows = ["| stage | runs | seconds | each | peak resident memory (largest process) |", "| --- | --- | --- | --- | --- |"]
     for name, each in grouped.items():
-        rows.append(f"| {name} | {len(each)} | {sum(each):.0f} | {' + '.join(f'{s:.0f}' for s in each)} |")
+        peak = f"{peaks[name] / 1024**2:.2f} GB" if name in peaks else ""
+        rows.append(f"| {name} | {len(each)} | {sum(each):.0f} | {' + '.join(f'{s:.0f}' for s in each)} | {peak} |")
     total = lines[-1][0] - lines[0][0]
     rows.append(f"| **total** | | **{total:.0f} ({int(total // 60)} min {total % 60:.0f} s)** | |")
     return "\n".join(rows)
@@ -96,13 +143,23 @@ def main() -> None:
         with subprocess.Popen(["dvc", "repro", *args.dvc_args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as dvc, \
              args.log.open("w") as log:  # fmt: skip
             log.write(f"{lines[0][0]:.1f} start\n")
+            memory = PeakMemory(dvc.pid)
+            memory.start()
             for text in dvc.stdout:
                 lines.append((time.time(), text.rstrip("\n")))
                 log.write(f"{lines[-1][0]:.1f} {lines[-1][1]}\n")
                 log.flush()
+                if m := STAGE.match(lines[-1][1]):
+                    memory.stage = m.group(1)
+            memory.done.set()
+            memory.join()
         lines.append((time.time(), "end"))
         with args.log.open("a") as log:
+            for stage, kb in memory.peaks.items():
+                lines.append((lines[-1][0], f"#peak {stage} {kb}"))
+                log.write(f"{lines[-1][0]:.1f} {lines[-1][1]}\n")
             log.write(f"{lines[-1][0]:.1f} end\n")
+        lines.append((lines[-1][0], "end"))
     finally:
         if busy:
             busy.kill()

@@ -5,7 +5,6 @@ refused before anything is written (the same metrics from two places: tests/test
 from __future__ import annotations
 
 import json
-import re
 import shutil
 import sqlite3
 import subprocess
@@ -14,6 +13,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from helpers import refused
 
 from offroad_path.drive import run_drive
 from offroad_path.steering.task import SteeringTask
@@ -103,7 +103,41 @@ def test_an_unknown_policy_is_refused_before_anything_is_written(inputs, tmp_pat
     assert not any(tmp_path.iterdir())
 
 
-def test_a_world_config_that_did_not_render_the_test_world_is_refused(compose_config, inputs, tmp_path):
-    with pytest.raises(ValueError, match=re.escape(f"{inputs / 'synthetic' / 'test_000'}: rendered with another world config")):
-        run_drive(compose_config(*overrides(inputs, tmp_path), "world.max_curvature=0.05", "mlflow.enabled=false"))
-    assert not any(tmp_path.iterdir())
+@pytest.mark.parametrize(
+    "override", ["world.max_curvature=0.05", "world.trees_per_hectare=300", "world.hfov_deg=120", "world.obstacles_per_100m=9"]
+)
+def test_a_world_config_that_did_not_render_the_test_world_is_refused(compose_config, inputs, tmp_path, capsys, override):
+    meta = inputs / "synthetic" / "test_000" / "meta.json"
+    cfg = compose_config(*overrides(inputs, tmp_path), override, "mlflow.enabled=false")
+    refused(run_drive, cfg, capsys, tmp_path, meta, f"{override.split('=')[0]}={override.split('=')[1]}")
+
+
+def test_a_route_longer_than_the_test_worlds_is_refused(compose_config, inputs, tmp_path, capsys):
+    cfg = compose_config(*overrides(inputs, tmp_path), "drive.length_m=1e9", "mlflow.enabled=false")
+    refused(run_drive, cfg, capsys, tmp_path, "drive.length_m=1e+09", "test_000")
+
+
+@pytest.mark.parametrize(
+    ("override", "says"),
+    [("drive.arguments.steering=[]", "lists no policy"), ("drive.other_vehicle.wheelbase_m=0", "drive.other_vehicle.wheelbase_m")],
+)
+def test_arguments_without_meaning_are_refused_before_driving(compose_config, inputs, tmp_path, capsys, override, says):
+    refused(run_drive, compose_config(*overrides(inputs, tmp_path), override, "mlflow.enabled=false"), capsys, tmp_path, says)
+
+
+def test_a_path_networks_checkpoint_given_as_pilotnet_is_named(compose_config, inputs, tmp_path, capsys):
+    path_network = inputs / "runs" / "unet-none" / "seed0" / "checkpoints" / "best.ckpt"
+    cfg = compose_config(*overrides(inputs, tmp_path), f"drive.pilotnets.pilotnet={path_network}", "mlflow.enabled=false")
+    refused(run_drive, cfg, capsys, tmp_path, path_network, "not a PilotNet checkpoint")
+
+
+@pytest.mark.parametrize(
+    ("damage", "says"), [(lambda m: "{broken", "cannot be read as JSON"), (lambda m: json.dumps({**m, "seed": None}), '"seed"')]
+)
+def test_a_test_worlds_damaged_meta_json_is_named(compose_config, inputs, tmp_path, capsys, damage, says):
+    shutil.copytree(inputs, tmp_path / "inputs")
+    meta = tmp_path / "inputs" / "synthetic" / "test_000" / "meta.json"
+    meta.write_text(damage(json.loads(meta.read_text())))
+    refused(
+        run_drive, compose_config(*overrides(tmp_path / "inputs", tmp_path / "out"), "mlflow.enabled=false"), capsys, tmp_path, meta, says
+    )

@@ -5,10 +5,12 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import platform
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -110,16 +112,29 @@ def test_a_stopped_stage_leaves_no_temporary_output(tmp_path):
 
 def without_vector_kernels() -> dict[str, str]:
     """An environment in which OpenCV and NumPy use none of their CPU-specific vector kernels (the
-    dispatched ones: SSE4 and up for OpenCV, X86_V3 and up for NumPy)."""
+    dispatched ones: SSE4 and up for OpenCV, AVX-512 among them, X86_V3 and up for NumPy) and
+    OpenBLAS runs its oldest x86-64 kernels."""
     from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
     dispatched = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
-    env = {"OPENCV_CPU_DISABLE": "SSE4.1,SSE4.2,POPCNT,AVX,FP16,AVX2,FMA3"}
+    env = {"OPENCV_CPU_DISABLE": "SSE4.1,SSE4.2,POPCNT,AVX,FP16,AVX2,FMA3,AVX512-SKX", "OPENBLAS_CORETYPE": "Prescott"}
     return env | ({"NPY_DISABLE_CPU_FEATURES": " ".join(dispatched)} if dispatched else {})
 
 
-@pytest.mark.slow(seconds=30)
-def test_the_world_renders_the_same_bytes_with_and_without_vector_kernels(tmp_path):
+def openblas_cores() -> list[str]:
+    """OpenBLAS kernel sets this CPU can run (OPENBLAS_CORETYPE): NumPy's matmul, dot and linalg
+    take the newest by default (SkylakeX here, Haswell on an AVX2 machine), and each rounds differently."""
+    flags = set(Path("/proc/cpuinfo").read_text().split()) if Path("/proc/cpuinfo").is_file() else set()
+    return [core for core, needs in (("Prescott", "sse3"), ("Nehalem", "sse4_2"), ("Sandybridge", "avx"), ("Haswell", "avx2"),
+            ("SkylakeX", "avx512f")) if needs in flags or (needs == "sse3" and "pni" in flags)]  # fmt: skip
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="the kernel sets named are x86-64's")
+@pytest.mark.slow(seconds=40)
+def test_the_world_renders_the_same_bytes_on_every_cpu_kernel_set(tmp_path):
+    """Issue 42: the world rendered on an AVX2 and an AVX-512 machine differed (OpenBLAS's Haswell and
+    SkylakeX kernels in the renderer's matrix products); NumPy's and OpenCV's dispatch never did."""
+
     def render(name: str, env: dict[str, str]) -> dict[str, str]:
         out = tmp_path / name
         cli = [sys.executable, "-m", "offroad_path.synthesize", *TINY, f"synthesize.out_dir={out}", f"hydra.run.dir={tmp_path / 'hydra'}"]
@@ -131,4 +146,9 @@ def test_the_world_renders_the_same_bytes_with_and_without_vector_kernels(tmp_pa
     probe = "import cv2; print(cv2.getCPUFeaturesLine())"
     line = subprocess.run([sys.executable, "-c", probe], env={**os.environ, **scalar}, capture_output=True, text=True).stdout
     assert "*AVX2?" in line or "*AVX2" not in line, line  # OpenCV's AVX2 kernels are off (or were never there)
-    assert render("vector", {}) == render("scalar", scalar)
+    assert "*AVX512-SKX?" in line or "*AVX512-SKX" not in line, line
+    cores = openblas_cores()
+    assert "Prescott" in cores and "Nehalem" in cores, cores
+    reference = render("default", {})
+    for name, env in [("scalar", scalar), *((core, {"OPENBLAS_CORETYPE": core}) for core in cores)]:
+        assert render(name, env) == reference, f"{name} rendered other bytes"

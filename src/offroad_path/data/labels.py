@@ -11,9 +11,10 @@ import numpy as np
 
 from offroad_path.errors import InputError
 from offroad_path.geometry.path import distance_along
-from offroad_path.labelling.shards import SHARD_FILE
 from offroad_path.sequence.poses import read_poses
 from offroad_path.sequence.reader import Sequence, open_sequence
+
+SHARD_FILE = "shard.json"  # in a label shard's folder (labelling/shards.py): a shard is not a whole run
 
 
 @dataclass(frozen=True)

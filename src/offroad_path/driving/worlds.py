@@ -68,15 +68,16 @@ def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
 
 def check_worlds(worlds: list[TestWorld], world_cfg, d) -> None:
     """Before any world is built: each was rendered with `world_cfg` (world.record.check_rendered_with),
-    and its drive is long enough for d.length_m of route with the pursuit's look-ahead beyond it."""
+    and its drive holds d.length_m of route (a drive ends drive.respawn_m before the reference's end:
+    a longer route would be cut short while the report states d.length_m)."""
     for w in worlds:
         check_rendered_with(world_cfg, Path(w.folder) / "meta.json", w.recorded)
     shortest = min(worlds, key=lambda w: float(w.recorded.get("distance_m", math.inf)))
-    room = float(shortest.recorded.get("distance_m", math.inf)) - END_MARGIN_M
+    room = float(shortest.recorded.get("distance_m", math.inf)) - d.respawn_m
     if d.length_m > room:
         raise ConfigValueError(
-            f"drive.length_m={d.length_m:g}: longer than the route test world {shortest.name} leaves ({room:.1f} m: its "
-            f"{shortest.recorded['distance_m']:.1f} m drive less {END_MARGIN_M:g} m of look-ahead)"
+            f"drive.length_m={d.length_m:g}: longer than the route test world {shortest.name} holds ({room:.1f} m: its "
+            f"{shortest.recorded['distance_m']:.1f} m drive less drive.respawn_m)"
         )
 
 

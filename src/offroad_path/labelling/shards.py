@@ -20,10 +20,10 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from offroad_path.data.labels import SHARD_FILE
 from offroad_path.errors import InputError
 from offroad_path.utils.rules import ConfigValueError
 
-SHARD_FILE = "shard.json"
 # Where a job writes and how it runs, not what it computes: shards and their merge may differ in these.
 NOT_COMPUTED = ("out_dir", "metrics_path", "workers", "shard", "shards", "merge_from")
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from offroad_path.config import WorldConfig
 from offroad_path.world.classes import DIRT, GRASS, PAVED, WATER
-from offroad_path.world.kernels import sample_bilinear
+from offroad_path.world.kernels import matmul, rigid_inverse, sample_bilinear
 from offroad_path.world.scene import World
 from offroad_path.world.trajectory import ARC_STEP_M
 
@@ -83,6 +83,6 @@ def _fork_points(world: World) -> np.ndarray:
 
 
 def _in_view(points: np.ndarray, camera_to_world: np.ndarray, tan_half_fov: float) -> bool:
-    x, _, z, _ = np.linalg.inv(camera_to_world) @ points.T
+    x, _, z, _ = matmul(rigid_inverse(camera_to_world), points.T)
     ahead = (z > FORK_RANGE_M[0]) & (z < FORK_RANGE_M[1])
     return bool(np.any(ahead & (np.abs(x) < z * tan_half_fov)))

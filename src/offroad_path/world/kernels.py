@@ -125,3 +125,48 @@ def sample_bilinear(image: np.ndarray, mx: np.ndarray, my: np.ndarray, wrap: boo
     top = v00 + (v01 - v00) * ax
     bottom = v10 + (v11 - v10) * ax
     return (top + (bottom - top) * ay).astype(np.float32, copy=False)
+
+
+# -- Vector algebra without BLAS -------------------------------------------------------------------
+# NumPy's matmul, dot, 1-D norm and linalg call OpenBLAS, which picks its kernels by CPU (Haswell,
+# SkylakeX, Zen ...) at run time: products of the same arrays differ in the last bits between an AVX2
+# and an AVX-512 machine, and a rendered pixel with them (`OPENBLAS_CORETYPE=Haswell` rendered other
+# bytes on the AVX-512 machine, tests/test_synthesize_stage.py). These sum the products one term at a
+# time, in index order, with NumPy's elementwise multiply and add: no fused multiply-add, no blocking.
+
+
+def matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b for a (..., n, k) or (k,) and b (..., k, m) or (k,), as NumPy's matmul broadcasts."""
+    a, b = np.asarray(a), np.asarray(b)
+    a2 = a[None] if a.ndim == 1 else a
+    b2 = b[:, None] if b.ndim == 1 else b
+    out = a2[..., :, 0, None] * b2[..., 0, None, :]
+    for i in range(1, a2.shape[-1]):
+        out = out + a2[..., :, i, None] * b2[..., i, None, :]
+    if b.ndim == 1:
+        out = out[..., 0]
+    return out[0] if a.ndim == 1 else out
+
+
+def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The dot product along the last axis (a · b per row), broadcast."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    out = a[..., 0] * b[..., 0]
+    for i in range(1, a.shape[-1]):
+        out = out + a[..., i] * b[..., i]
+    return out
+
+
+def norm_rows(a: np.ndarray) -> np.ndarray:
+    """The Euclidean length along the last axis (np.linalg.norm(a, axis=-1))."""
+    return np.sqrt(dot_rows(a, a))
+
+
+def rigid_inverse(pose: np.ndarray) -> np.ndarray:
+    """The inverse of rigid 4x4 transforms (..., 4, 4): [R^T, -R^T t] (np.linalg.inv goes through LAPACK)."""
+    rotation_t = np.swapaxes(pose[..., :3, :3], -1, -2)
+    out = np.zeros_like(pose)
+    out[..., :3, :3] = rotation_t
+    out[..., :3, 3] = -matmul(rotation_t, pose[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from offroad_path.world.kernels import dot_rows, norm_rows
+
 NEAR_M = 0.05
 SPHERE, CYLINDER, BOX = 0, 1, 2
 PARAM_COUNT = {SPHERE: 4, CYLINDER: 5, BOX: 7}
@@ -81,7 +83,7 @@ class Objects:
                 half_h = (y_bottom - y_top) / 2
                 out[i] = (x, y_top + half_h, z, np.hypot(half_h, r))
             else:
-                out[i] = (*p[:3], np.linalg.norm(p[3:6]))
+                out[i] = (*p[:3], norm_rows(p[3:6]))
         return out
 
 
@@ -93,9 +95,9 @@ def intersect(kind: int, p: np.ndarray, o: np.ndarray, d: np.ndarray) -> tuple[n
 def _sphere(p: np.ndarray, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     centre, r = p[:, :3], p[:, 3]
     oc = o - centre
-    a = np.einsum("ij,ij->i", d, d)
-    b = np.einsum("ij,ij->i", d, oc)
-    disc = b * b - a * (np.einsum("ij,ij->i", oc, oc) - r * r)
+    a = dot_rows(d, d)
+    b = dot_rows(d, oc)
+    disc = b * b - a * (dot_rows(oc, oc) - r * r)
     root = np.sqrt(np.maximum(disc, 0.0))
     t = (-b - root) / a
     t = np.where(t > NEAR_M, t, (-b + root) / a)

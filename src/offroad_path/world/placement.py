@@ -10,6 +10,7 @@ import numpy as np
 
 from offroad_path.config import WorldConfig
 from offroad_path.world.classes import BASE_COLORS, FOLIAGE, OBSTACLE, TREE, TRUNK_COLOR
+from offroad_path.world.kernels import norm_rows
 from offroad_path.world.objects import Objects
 from offroad_path.world.terrain import Terrain, polyline_mask
 from offroad_path.world.trajectory import ARC_STEP_M, Curve
@@ -103,7 +104,7 @@ def _fence(place: Placement, i: int, side: int, colour: np.ndarray) -> None:
         posts.append((xz, place.ground_y(xz)))
         objects.add_box(np.array([xz[0], posts[-1][1] - 0.55, xz[1]]), np.array([0.06, 0.6, 0.06]), drive.heading[j], OBSTACLE, colour)
     for (a, ya), (b, yb) in itertools.pairwise(posts):
-        mid, length = (a + b) / 2, np.linalg.norm(b - a)
+        mid, length = (a + b) / 2, norm_rows(b - a)
         yaw = np.arctan2(-(b[1] - a[1]), b[0] - a[0])  # rail's local x, (cos, 0, -sin), along a -> b
         for height in (0.45, 0.95):
             y = (ya + yb) / 2 - height

@@ -24,6 +24,7 @@ from offroad_path.utils.media import write_image
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.conditions import conditions_csv, frame_conditions
+from offroad_path.world.kernels import matmul, rigid_inverse
 from offroad_path.world.render import PinholeCamera, render_view
 from offroad_path.world.scene import World, build_world
 
@@ -64,15 +65,15 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
     for k, pose in enumerate(world.poses):
         name = f"{k:06d}.png"
         left = render_view(world, camera, pose, cfg.max_distance_m, rays)
-        right = render_view(world, camera, pose @ to_right, cfg.max_distance_m, rays)
+        right = render_view(world, camera, matmul(pose, to_right), cfg.max_distance_m, rays)
         write_image(out_dir / "image_l" / name, left.image[:, :, ::-1], FAST_PNG)
         write_image(out_dir / "image_r" / name, right.image[:, :, ::-1], FAST_PNG)
         write_image(out_dir / "depth" / name, encode_depth(left.depth), FAST_PNG)
         write_image(out_dir / "semantic" / name, left.semantic, SEMANTIC_PNG)
         class_pixels += np.bincount(left.semantic.ravel(), minlength=len(CLASS_NAMES))
 
-    first_inv = np.linalg.inv(world.poses[0])
-    relative = first_inv[None] @ world.poses  # KITTI convention: the first pose is the identity
+    first_inv = rigid_inverse(world.poses[0])
+    relative = matmul(first_inv[None], world.poses)  # KITTI convention: the first pose is the identity
     (out_dir / "calib.txt").write_text(StereoCalibration.from_intrinsics(camera.K, baseline).to_text())
     (out_dir / "poses.txt").write_text(poses_to_text(relative))
     (out_dir / "times.txt").write_text("".join(f"{k / cfg.fps:.6f}\n" for k in range(len(world.poses))))

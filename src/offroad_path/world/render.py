@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from offroad_path.world.classes import SKY, WATER
-from offroad_path.world.kernels import sample_bilinear
+from offroad_path.world.kernels import dot_rows, matmul, norm_rows, sample_bilinear
 from offroad_path.world.objects import intersect
 from offroad_path.world.scene import World
 from offroad_path.world.terrain import Terrain
@@ -202,7 +202,7 @@ def trace_objects(world: World, shot: Shot, t_bound: np.ndarray, max_t: float):
     if not len(objects.kind):
         return t_best, normal, index
     origin, rot = pose[:3, 3], pose[:3, :3]
-    x, y, z = ((objects.bounds[:, :3] - origin) @ rot).T  # centres in the camera frame
+    x, y, z = matmul(objects.bounds[:, :3] - origin, rot).T  # centres in the camera frame
     r = objects.bounds[:, 3]
     near = z - r
     u_lo, u_hi = _tangent_range(x, z, r, camera.fx, camera.cx)
@@ -235,7 +235,7 @@ def trace_objects(world: World, shot: Shot, t_bound: np.ndarray, max_t: float):
 def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: float, cam_rays: np.ndarray | None = None) -> View:
     """Render one camera with camera-to-world `pose` (4x4)."""
     rays = camera.rays() if cam_rays is None else cam_rays
-    dirs = rays @ pose[:3, :3].T  # (M, 3) world directions, t = depth
+    dirs = matmul(rays, pose[:3, :3].T)  # (M, 3) world directions, t = depth
     origin = pose[:3, 3]
     t_ground = march_terrain(world.terrain, origin, dirs, max_t)
     t, n_obj, obj_index = trace_objects(world, Shot(camera, pose, dirs), t_ground, max_t)
@@ -263,14 +263,14 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     semantic = np.full(len(dirs), SKY, np.uint8)
     semantic[lit] = cls
 
-    distance = np.linalg.norm(d_lit, axis=1)
+    distance = norm_rows(d_lit)
     unit = d_lit / distance[:, None]
     # A pixel's footprint on the surface: the geometric mean of its two axes picks the mip level.
-    footprint = t_lit / camera.fx / np.sqrt(np.maximum(np.abs(np.einsum("ij,ij->i", unit, normal)), 0.1))
+    footprint = t_lit / camera.fx / np.sqrt(np.maximum(np.abs(dot_rows(unit, normal)), 0.1))
     detail = _detail(world, points, cls, footprint, ground)
     sun_vis = np.ones(len(lit))
     sun_vis[g] = sample_bilinear(world.shadow, *world.material_grid.coords(points[g, 0], points[g, 2]))
-    sun = np.maximum(normal @ world.sky.sun, 0.0) * sun_vis
+    sun = np.maximum(matmul(normal, world.sky.sun), 0.0) * sun_vis
     colour = albedo * detail * (0.35 * world.sky.zenith + 0.9 * sun[:, None])
     water = np.flatnonzero(cls == WATER)
     if len(water):
@@ -281,7 +281,7 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     rgb[lit] = colour * (1 - fog[:, None]) + world.sky.horizon * fog[:, None]
     sky = np.flatnonzero(~hit)
     sky_dirs = dirs[sky]
-    rgb[sky] = _sky_colour(world, sky_dirs / np.linalg.norm(sky_dirs, axis=1, keepdims=True))
+    rgb[sky] = _sky_colour(world, sky_dirs / norm_rows(sky_dirs)[:, None])
 
     shape = (camera.height, camera.width)
     return View(image=_gamma_encode(rgb).reshape(*shape, 3), depth=t.reshape(shape), semantic=semantic.reshape(shape))
@@ -322,7 +322,7 @@ def _sky_colour(world: World, unit: np.ndarray) -> np.ndarray:
     sky = world.sky
     up = np.clip(-unit[:, 1], 0.0, 1.0)
     base = sky.horizon + (sky.zenith - sky.horizon) * np.sqrt(up)[:, None]
-    sun_glow = np.clip(unit @ sky.sun, 0, 1) ** 64
+    sun_glow = np.clip(matmul(unit, sky.sun), 0, 1) ** 64
     colour = base + 0.6 * sun_glow[:, None]
     # Clouds on a plane far overhead: a function of direction only, identical in both cameras.
     rising = up > 0.02

@@ -13,7 +13,7 @@ import numpy as np
 
 from offroad_path.config import WorldConfig
 from offroad_path.world.classes import BASE_COLORS, DIRT, GRASS, PAVED, WATER
-from offroad_path.world.kernels import gaussian_blur, resize_cubic
+from offroad_path.world.kernels import gaussian_blur, matmul, norm_rows, resize_cubic
 from offroad_path.world.objects import Objects
 from offroad_path.world.placement import Placement, place_objects
 from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip
@@ -308,7 +308,7 @@ def _shadow_map(grid: Grid, terrain: Terrain, objects: Objects, sun: np.ndarray)
             cx, cy, cz, r = p
             # The sphere's silhouette seen from the sun: its rim perpendicular to the sun.
             e1 = np.cross(sun, [0.0, 1.0, 0.0])
-            e1 /= np.linalg.norm(e1)
+            e1 /= norm_rows(e1)
             e2 = np.cross(sun, e1)
             pts = np.array([cx, cy, cz]) + r * (np.cos(ring)[:, None] * e1 + np.sin(ring)[:, None] * e2)
         elif kind == 1:
@@ -325,7 +325,7 @@ def _shadow_map(grid: Grid, terrain: Terrain, objects: Objects, sun: np.ndarray)
             c, s = np.cos(yaw), np.sin(yaw)
             rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # box to world
             corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)]) * half
-            pts = centre + corners @ rot.T
+            pts = centre + matmul(corners, rot.T)
         cast(pts)
     soft = gaussian_blur(shadow, 0.08 / grid.step)
     return soft.astype(np.float32) / 255.0

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offroad_path.world.kernels import resize_cubic, sample_bilinear
+from offroad_path.world.kernels import norm_rows, resize_cubic, sample_bilinear
 
 
 @dataclass
@@ -107,7 +107,7 @@ class Terrain:
         """Unit surface normals (N, 3) in the world frame (pointing up, i.e. negative y)."""
         grad = sample_bilinear(self._grad, *self.grid.coords(x, z))
         n = np.stack([-grad[:, 0], -np.ones(len(grad), np.float32), -grad[:, 1]], axis=1)
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
+        return n / norm_rows(n)[:, None]
 
 
 def fourier_hills(rng: np.random.Generator, grid: Grid, height_m: float, wavelengths_m: tuple[float, float], count: int) -> np.ndarray:

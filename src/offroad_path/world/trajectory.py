@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.world.kernels import norm_rows
 from offroad_path.world.terrain import Terrain
 
 ARC_STEP_M = 0.05
@@ -129,4 +130,4 @@ def normalised_steering(curvature: np.ndarray, vehicle: VehicleGeometry) -> np.n
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / norm_rows(v)[..., None]
