@@ -175,7 +175,7 @@ def trained(tiny_config, tmp_path_factory) -> tuple[Path, str, Path]:
 
     out = made_once(tmp_path_factory, "trained", lambda out: train(tiny_config(out, "model=unet", "trainer.max_epochs=1")))
     with sqlite3.connect(out / "mlflow.db") as db:
-        (run_id,) = db.execute("select run_uuid from runs where name = 'train unet-none'").fetchone()
+        (run_id,) = db.execute("select run_uuid from runs where name = 'train unet-none seed0'").fetchone()
     return out / "run" / "checkpoints" / "best.ckpt", run_id, out / "mlflow.db"
 
 

@@ -71,5 +71,5 @@ def test_two_processes_train_as_one_on_the_same_global_batch_and_resume_after_a_
     with sqlite3.connect(out / "mlflow.db") as db:
         runs = db.execute("select name, status from runs").fetchall()
         tested = db.execute("select count(*) from metrics where key = 'test/iou'").fetchone()[0]
-    assert sorted(runs) == [("train unet-none", "FINISHED"), ("train unet-none", "RUNNING")]  # the resumed one, the killed one
+    assert sorted(runs) == [("train unet-none seed0", "FINISHED"), ("train unet-none seed0", "RUNNING")]  # the resumed one, the killed one
     assert tested == 1

@@ -35,7 +35,7 @@ def test_wandb_logger_offline_records_the_run(tiny_config, tmp_path, monkeypatch
     import wandb
 
     run = wandb.run  # what the logger sent, read back before the run closes
-    assert run.offline and run.name == "train fcn-none" and "stage=train" in run.tags
+    assert run.offline and run.name == "train fcn-none seed0" and "stage=train" in run.tags
     assert run.config["model.name"] == "fcn" and run.config["logger._target_"].endswith("WandbLogger")
     assert run.summary["test/iou"] == metrics["test/iou"] and run.summary.get("val/iou") is not None
     wandb.finish()

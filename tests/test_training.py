@@ -59,7 +59,7 @@ def test_resume_continues_the_step_count_and_mlflow_has_the_run(compose_config, 
     with sqlite3.connect(tmp_path / "mlflow.db") as db:
         runs = db.execute("select run_uuid, name from runs").fetchall()
         keys = {k for (k,) in db.execute("select distinct key from metrics")}
-    assert len(runs) == 2 and all(name == "train fcn-none" for _, name in runs)
+    assert len(runs) == 2 and all(name == "train fcn-none seed0" for _, name in runs)
     assert {"train/loss_epoch", "val/iou", "val/precision", "val/recall", "val/accuracy", "test/iou"} <= keys
     # Artifacts beside the database: validation samples each epoch, the best checkpoint, metrics.
     stored = {p.as_posix().split("/artifacts/", 1)[1] for p in (tmp_path / "mlartifacts").rglob("*") if p.is_file()}

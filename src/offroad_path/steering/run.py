@@ -100,7 +100,7 @@ def fit_steering(cfg: DictConfig) -> dict:
         write_more=write_predictions,
     )
     tags = {"stage": stage, "model": "pilotnet", "slip": str(steering.slip).lower()}
-    logger = training_logger(cfg, "train_steering pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
+    logger = training_logger(cfg, f"{stage} pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
     results = fit(cfg, task, data, spec, logger)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}
     true, predicted = scored["true"], scored["predicted"]

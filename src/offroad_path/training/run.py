@@ -41,7 +41,7 @@ from offroad_path.training.pretrained import initialise
 from offroad_path.training.task import BaseTask, SegmentationTask
 from offroad_path.utils.atomic import MARKER, atomic_directory, owned
 from offroad_path.utils.ranks import is_global_zero
-from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, tracking_uri
+from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, pipeline_parent, tracking_uri
 from offroad_path.world.classes import CLASS_NAMES
 
 log = logging.getLogger(__name__)
@@ -53,12 +53,13 @@ def training_logger(cfg: DictConfig, run_name: str, tags: dict, params: dict) ->
     sweep in a multirun, and there is none when mlflow.enabled is false; logger=null logs nothing."""
     if cfg.logger is None or not is_global_zero():  # Lightning logs from rank 0 only
         return None
-    tags = {**tags, "experiment_name": cfg.experiment_name}
+    run_name = f"{run_name} seed{cfg.seed}"  # unique per training seed in the dashboard's run list
+    tags = {**tags, "experiment_name": cfg.experiment_name, "seed": str(cfg.seed)}
     target = cfg.logger["_target_"]
     if target.endswith(".MLFlowLogger"):
         if not cfg.mlflow.enabled:
             return None
-        if parent := multirun_parent(cfg):
+        if parent := multirun_parent(cfg) or pipeline_parent(cfg):
             tags["mlflow.parentRunId"] = parent
         # The tracking URI is always explicit: Lightning's logger would otherwise fall back to ./mlruns.
         experiment_id(cfg.mlflow)  # created with its artifact location, which the logger would not set

@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
+
+# The experiment kind MLflow's dashboard opens an experiment as: model training (runs, models,
+# metrics), not GenAI development (traces), the default of MLflow 3 for an experiment without the tag.
+EXPERIMENT_KIND, MODEL_TRAINING = "mlflow.experimentKind", "custom_model_development"
 
 
 def tracking_uri(cfg: DictConfig) -> str:
@@ -30,9 +35,12 @@ def experiment_id(cfg: DictConfig) -> str:
 
     client = MlflowClient(tracking_uri(cfg))
     experiment = client.get_experiment_by_name(cfg.experiment)
-    if experiment is not None:
-        return experiment.experiment_id
-    return client.create_experiment(cfg.experiment, artifact_location=artifact_location(cfg))
+    if experiment is None:
+        created = client.create_experiment(cfg.experiment, artifact_location=artifact_location(cfg))
+        experiment = client.get_experiment(created)
+    if experiment.tags.get(EXPERIMENT_KIND) is None:  # MLflow 3 opens an experiment without it on its GenAI traces page
+        client.set_experiment_tag(experiment.experiment_id, EXPERIMENT_KIND, MODEL_TRAINING)
+    return experiment.experiment_id
 
 
 def flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
@@ -53,7 +61,9 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
     import mlflow
 
     mlflow.set_tracking_uri(tracking_uri(cfg.mlflow))
-    with mlflow.start_run(experiment_id=experiment_id(cfg.mlflow), run_name=stage) as run:
+    experiment = experiment_id(cfg.mlflow)
+    parent = pipeline_parent(cfg)
+    with mlflow.start_run(experiment_id=experiment, run_name=stage, tags={"mlflow.parentRunId": parent} if parent else None) as run:
         mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
         mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
         yield run
@@ -76,5 +86,42 @@ def multirun_parent(cfg: DictConfig) -> str | None:
     if found:
         return found[0].info.run_id
     parent = client.create_run(experiment, run_name=f"sweep {Path(sweep).name}", tags={"sweep_dir": sweep, "stage": "sweep"})
+    client.set_terminated(parent.info.run_id)
+    return parent.info.run_id
+
+
+def dvc_repro_process() -> str | None:
+    """`<host>-<pid>-<start>` of the `dvc repro` (or `dvc exp run`) this process runs under, found
+    among its ancestors (Linux /proc); None outside DVC. Every stage of one repro gets the same."""
+    pid = os.getppid()
+    while pid > 1:
+        try:
+            command = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            return None
+        names = [Path(c.decode(errors="replace")).name for c in command[:3]]
+        if "dvc" in names and any(c in (b"repro", b"exp") for c in command):
+            return f"{os.uname().nodename}-{pid}-{fields[19]}"  # field 22 of stat: the start time, in clock ticks after boot
+        pid = int(fields[1])
+    return None
+
+
+def pipeline_parent(cfg: DictConfig) -> str | None:
+    """Under `dvc repro`: the id of one parent run for the whole repro (made by its first stage that
+    logs), so that the dashboard shows each repro's stages together; None outside DVC."""
+    repro = dvc_repro_process()
+    if repro is None or not cfg.mlflow.enabled:
+        return None
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri(cfg.mlflow))
+    experiment = experiment_id(cfg.mlflow)
+    found = client.search_runs([experiment], filter_string=f"tags.dvc_repro = '{repro}'", max_results=1)
+    if found:
+        return found[0].info.run_id
+    parent = client.create_run(
+        experiment, run_name=f"dvc repro {time.strftime('%Y-%m-%d %H:%M')}", tags={"dvc_repro": repro, "stage": "dvc repro"}
+    )
     client.set_terminated(parent.info.run_id)
     return parent.info.run_id
