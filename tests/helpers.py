@@ -154,7 +154,7 @@ def tiny_repo(repo: Path) -> Path:
         # One policy of each kind, 4 m from two starts in the test world (tests/test_drive_stage.py drives more).
         "drive": {"arguments": {"steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet"],
                                 "traction": ["unet-segmentation", "pilotnet_slip"]},
-                  "worlds": 1, "starts_per_world": 2, "length_m": 4.0, "width": 128, "height": 72, "video": False,
+                  "worlds": 1, "starts_per_world": 2, "length_m": 4.0, "respawn_m": 1.0, "width": 128, "height": 72, "video": False,
                   "bootstrap": {"resamples": 100}},
         "threads": 1, "experiment_name": "tiny",
     }  # fmt: skip
