@@ -138,6 +138,4 @@ def test_a_test_worlds_damaged_meta_json_is_named(compose_config, inputs, tmp_pa
     shutil.copytree(inputs, tmp_path / "inputs")
     meta = tmp_path / "inputs" / "synthetic" / "test_000" / "meta.json"
     meta.write_text(damage(json.loads(meta.read_text())))
-    refused(
-        run_drive, compose_config(*overrides(tmp_path / "inputs", tmp_path / "out"), "mlflow.enabled=false"), capsys, tmp_path, meta, says
-    )
+    refused(run_drive, compose_config(*overrides(tmp_path / "inputs", tmp_path), "mlflow.enabled=false"), capsys, tmp_path, meta, says)

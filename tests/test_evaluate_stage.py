@@ -184,7 +184,9 @@ def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path
     run = subprocess.run(cli, capture_output=True, text=True)
     assert run.returncode == 2
     manifest = tmp_path / "runs" / "segnet-none" / "seed0" / "predictions" / "manifest.csv"
-    assert run.stderr.strip().splitlines()[-1] == f"error: {manifest}: manifest is missing (run the train stage first)"
+    assert run.stderr.strip().splitlines()[-1] == (
+        f"error: {manifest}: missing: evaluate.seeds lists seed 0; run train seed=0 for segnet-none, or list only seeds trained"
+    )
     assert not any(tmp_path.iterdir())
 
 

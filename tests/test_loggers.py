@@ -13,7 +13,7 @@ from offroad_path.train import train
 def test_csv_logger_writes_each_metric_and_the_config(tiny_config, tmp_path):
     cfg = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "logger=csv", f"logger.save_dir={tmp_path / 'logs'}")
     metrics = train(cfg)
-    (run,) = (tmp_path / "logs" / "train" / "fcn-none").iterdir()  # named after its stage and run, like the MLflow run
+    (run,) = (tmp_path / "logs" / "train" / "fcn-none" / "seed0").iterdir()  # named after its stage, run and seed, like the MLflow run
     with open(run / "metrics.csv") as f:
         rows = list(csv.DictReader(f))
     logged = {key for row in rows for key, value in row.items() if value}

@@ -62,7 +62,7 @@ def test_steering_under_slip_of_a_recorded_sequence_and_a_config_that_did_not_re
     slippery = compose_config(*SMALL, "world.slip.enabled=true").world
     steering = steering_under_slip(cfg, [tmp_path / "seq"], workers=1)
     np.testing.assert_array_equal(steering["seq"], build_world(slippery, 4).steering)
-    with pytest.raises(ValueError, match=re.escape(f"{tmp_path / 'seq'}: rendered with another world config")):
+    with pytest.raises(ValueError, match=re.escape(f"{tmp_path / 'seq' / 'meta.json'}: rendered with other world settings")):
         steering_under_slip(compose_config(*SMALL, "world.speed_max_mps=9").world, [tmp_path / "seq"], workers=1)
 
 
