@@ -163,7 +163,9 @@ def tiny_repo(repo: Path) -> Path:
     text = primary.read_text()
     assert "\n  - experiment: null" in text
     primary.write_text(text.replace("\n  - experiment: null", "\n  - experiment: tiny"))
-    (repo / "conf" / "mlflow" / "default.yaml").write_text("enabled: false\nexperiment: offroad-path\ntracking_uri: null\n")
+    (repo / "conf" / "mlflow" / "default.yaml").write_text(
+        "enabled: false\nexperiment: offroad-path\ntracking_uri: null\nlog_models: true\n"
+    )
     grid = repo / "conf" / "evaluate" / "default.yaml"  # one training seed: dvc.yaml's grid reads the list from this file
     text = grid.read_text()
     assert "\nseeds: [0, 1, 2]\n" in text

@@ -4,12 +4,24 @@ run. Real SQLite stores and a real DVC repo."""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import shutil
+import signal
+import socket
 import sqlite3
 import subprocess
 import sys
+import time
+import urllib.parse
+import urllib.request
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import mlflow
+import mlflow.models
+import pytest
 from helpers import git
 
 # What a DVC stage runs here: the parent run its MLflow runs would get, into the stage's output.
@@ -69,3 +81,62 @@ def test_an_existing_experiment_without_a_kind_gets_one(tmp_path):
     made = MlflowClient(uri).create_experiment("old", artifact_location=str(Path(tmp_path / "a")))  # as an earlier version made it
     assert experiment_id(OmegaConf.create({"experiment": "old", "tracking_uri": uri})) == made
     assert MlflowClient(uri).get_experiment(made).tags["mlflow.experimentKind"] == "custom_model_development"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def mlflow_server(db: Path) -> Iterator[Callable[..., dict]]:
+    """A real `mlflow server` on the store `db`; yields get(endpoint, **query) -> its JSON."""
+    port = free_port()
+    command = [sys.executable, "-m", "mlflow", "server", "--backend-store-uri", f"sqlite:///{db}",
+               "--host", "127.0.0.1", "--port", str(port), "--workers", "1"]  # fmt: skip
+    server = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+
+    def get(endpoint: str, **query: str) -> dict:
+        url = f"{get.url}/api/2.0/mlflow/{endpoint}?{urllib.parse.urlencode(query)}"
+        with urllib.request.urlopen(url, timeout=30) as response:
+            return json.load(response)
+
+    get.url = f"http://127.0.0.1:{port}"  # type: ignore[attr-defined]
+
+    try:
+        deadline = time.monotonic() + 90
+        while True:
+            try:
+                urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2).close()
+                break
+            except OSError:
+                assert server.poll() is None and time.monotonic() < deadline, "mlflow server did not start"
+                time.sleep(0.5)
+        yield get
+    finally:
+        os.killpg(server.pid, signal.SIGTERM)
+        server.wait(30)
+
+
+@pytest.mark.slow(seconds=30)
+def test_the_dashboard_over_rest_shows_the_model_its_datasets_and_the_best_version(trained, tmp_path):
+    _, run_id, db = trained
+    store = tmp_path / "mlflow.db"
+    shutil.copy(db, store)  # the server may migrate the store it opens: a copy (artifacts stay where they are)
+    with mlflow_server(store) as get:
+        experiment = get("experiments/get-by-name", experiment_name="offroad-path")["experiment"]
+        assert {"key": "mlflow.experimentKind", "value": "custom_model_development"} in experiment["tags"]
+        run = get("runs/get", run_id=run_id)["run"]
+        assert run["info"]["run_name"] == "train unet-none seed0"
+        datasets = {i["dataset"]["name"]: {t["value"] for t in i["tags"]} for i in run["inputs"]["dataset_inputs"]}
+        assert datasets == {"train": {"training"}, "val": {"validation"}, "test": {"testing"}}
+        model = get("registered-models/get", name="offroad-path-unet")["registered_model"]
+        (best,) = [a for a in model["aliases"] if a["alias"] == "best"]
+        version = get("model-versions/get", name="offroad-path-unet", version=best["version"])["model_version"]
+        assert version["run_id"] == run_id
+        mlflow.set_tracking_uri(get.url)
+        signature = mlflow.models.get_model_info("models:/offroad-path-unet@best").signature
+        (tensor,) = signature.inputs.inputs
+        assert tuple(tensor.shape[1:]) == (3, 48, 64)  # (N, 3, H, W): the tiny preset's input
+        assert tuple(signature.outputs.inputs[0].shape[1:]) == (2, 48, 64)  # path and not, per pixel

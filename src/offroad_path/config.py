@@ -544,6 +544,7 @@ class MlflowConfig:
     experiment: str = MISSING
     # None: $MLFLOW_TRACKING_URI if set, else sqlite:///mlflow.db at the project root.
     tracking_uri: str | None = MISSING
+    log_models: bool = MISSING  # each training run's network with its signature, and a registered version (training/published.py)
 
 
 @dataclass

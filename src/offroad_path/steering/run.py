@@ -14,14 +14,14 @@ import torch
 from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
-from offroad_path.config import steering_stage
+from offroad_path.config import steering_folder, steering_stage
 from offroad_path.data.labels import read_label_run
 from offroad_path.sequence import meta
 from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
 from offroad_path.steering.frames import PARTS, steering_split
 from offroad_path.steering.task import SteeringTask
-from offroad_path.training.run import RunSpec, fit, run_identity, training_logger
+from offroad_path.training.run import MANIFEST_CONTEXTS, RunSpec, fit, run_identity, training_logger
 from offroad_path.utils.atomic import write_text_atomic
 
 log = logging.getLogger("offroad_path.train_steering")
@@ -98,6 +98,9 @@ def fit_steering(cfg: DictConfig) -> dict:
         max_epochs=steering.max_epochs,
         patience=steering.patience,
         write_more=write_predictions,
+        input_size=(steering.height, steering.width),
+        manifests={context: Path(steering.split_dir) / f"{name}.csv" for context, name in MANIFEST_CONTEXTS},
+        register_as=steering_folder(steering.slip).replace("steering", "pilotnet"),  # pilotnet, pilotnet_slip
     )
     tags = {"stage": stage, "model": "pilotnet", "slip": str(steering.slip).lower()}
     logger = training_logger(cfg, f"{stage} pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))

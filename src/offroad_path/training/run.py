@@ -11,7 +11,7 @@ import logging
 import shutil
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import lightning as L
@@ -38,6 +38,7 @@ from offroad_path.training.checkpoints import (
     save_weights,
 )
 from offroad_path.training.pretrained import initialise
+from offroad_path.training.published import publish
 from offroad_path.training.task import BaseTask, SegmentationTask
 from offroad_path.utils.atomic import MARKER, atomic_directory, owned
 from offroad_path.utils.ranks import is_global_zero
@@ -95,8 +96,14 @@ class RunSpec:
     # What the run writes besides its weights and metrics: write_more(task, data, tmp) puts files in
     # the output's temporary folder and returns more metrics.
     write_more: Callable[[BaseTask, L.LightningDataModule, Path], dict] | None = None
+    # For MLflow (training/published.py): the network's input (height, width), the manifests it
+    # learnt from by context, and the architecture whose registered model gets a version (None: none).
+    input_size: tuple[int, int] = (0, 0)
+    manifests: dict[str, Path] = field(default_factory=dict)
+    register_as: str | None = None
 
 
+MANIFEST_CONTEXTS = (("training", "train"), ("validation", "val"), ("testing", "test"))  # MLflow's dataset contexts
 NUM_CLASSES = {"path": 2, "semantic": len(CLASS_NAMES)}  # a segmentation target's classes: path and not, or the world's
 PACKAGE = Path(__file__).resolve().parents[1]
 
@@ -222,6 +229,8 @@ def fit(
     if isinstance(logger, MLFlowLogger):
         logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
         logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
+        if cfg.mlflow.log_models and spec.input_size[0]:
+            publish(logger.run_id, tracking_uri(cfg.mlflow), task, spec, best_score)
     return metrics
 
 
@@ -267,6 +276,9 @@ def fit_segmentation(
         validate=bool(data.samples["val"]),
         extra_callbacks=(LogSamples(own.sample_images),),
         write_more=write_more,
+        input_size=(cfg.data.height, cfg.data.width),
+        manifests={context: data.split_dir / f"{name}.csv" for context, name in MANIFEST_CONTEXTS},
+        register_as=m.name if stage == "train" else None,  # path networks; pretraining's are steps towards them
     )
     tags = {"stage": stage, "model": m.name, "pretraining": pretraining_name}
     logger = training_logger(cfg, f"{stage} {m.name}-{pretraining_name}", tags, OmegaConf.to_container(cfg, resolve=True))
