@@ -250,3 +250,38 @@ def test_calibrate_refuses_a_decompression_bomb_among_its_views(tmp_path):
     bomb = png_declaring(tmp_path / "view.png", 40000, 40000)
     with pytest.raises(InputError, match="declares 40000x40000"):
         read_view(bomb)
+
+
+# -- Bags and label runs given to the wrong place -----------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", ["ros1", "mcap"])
+def test_the_stereo_pair_of_a_bag_is_found_from_its_camera_infos(raw_drive, rig, tmp_path, kind):
+    pytest.importorskip("rosbags")
+    from raw_rig import write_bag
+
+    from offroad_path.recordings.bags import Bag
+
+    bag = write_bag(tmp_path / ("drive.bag" if kind == "ros1" else "drive_mcap"), kind, raw_drive[:3], rig)
+    with Bag(bag) as opened:  # ROS 1's CameraInfo spells the projection P, ROS 2's p
+        assert opened.stereo_pair() == ("/stereo/left/image_raw", "/stereo/right/image_raw")
+
+
+def test_evaluate_names_a_label_run_that_is_not_the_splits(compose_config, trained, split_dir, recordings, tmp_path, capsys):
+    other = tmp_path / "other_labels"  # a label run of another recording name than the split's
+    label(label_cfg(compose_config, recordings, tmp_path, f"label.out_dir={other}", "mlflow.enabled=false"))
+    shutil.move(other / "drive", other / "field")
+    summary = json.loads((other / "summary.json").read_text())
+    summary["sequences"][0]["name"] = "field"
+    (other / "summary.json").write_text(json.dumps(summary))
+    runs = tmp_path / "runs"
+    (runs / "unet-none").mkdir(parents=True)
+    (runs / "unet-none" / "seed0").symlink_to(trained[0].parents[1])
+    pp = tmp_path / "pp" / "unet-none"
+    pp.mkdir(parents=True)
+    (pp / "seed0").symlink_to(trained[0].parents[1] / "predictions")
+    cfg = compose_config(f"evaluate.runs_dir={runs}", f"evaluate.postprocessed_dir={tmp_path / 'pp'}", "evaluate.runs=[unet-none]",
+                         "evaluate.seeds=[0]", f"evaluate.labels_dir={other}", f"split.out_dir={split_dir}",
+                         f"evaluate.out_dir={tmp_path / 'eval'}", f"evaluate.metrics_path={tmp_path / 'e.json'}",
+                         f"evaluate.plots_dir={tmp_path / 'plots'}", "mlflow.enabled=false", "evaluate.temporal.enabled=false")  # fmt: skip
+    refused(evaluate, cfg, capsys, tmp_path, other, "holds no sequence drive of the test manifest")
