@@ -153,13 +153,10 @@ def main() -> None:
                     memory.stage = m.group(1)
             memory.done.set()
             memory.join()
-        lines.append((time.time(), "end"))
+        ended = time.time()
+        lines += [(ended, f"#peak {stage} {kb}") for stage, kb in memory.peaks.items()] + [(ended, "end")]
         with args.log.open("a") as log:
-            for stage, kb in memory.peaks.items():
-                lines.append((lines[-1][0], f"#peak {stage} {kb}"))
-                log.write(f"{lines[-1][0]:.1f} {lines[-1][1]}\n")
-            log.write(f"{lines[-1][0]:.1f} end\n")
-        lines.append((lines[-1][0], "end"))
+            log.writelines(f"{ended:.1f} {text}\n" for _, text in lines[-len(memory.peaks) - 1 :])
     finally:
         if busy:
             busy.kill()

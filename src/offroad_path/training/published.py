@@ -76,7 +76,7 @@ def publish(run_id: str, tracking_uri: str, task: L.LightningModule, spec: RunSp
     name = registered_name(architecture)
     if not client.search_registered_models(f"name = '{name}'"):
         client.create_registered_model(
-            name, description=f"{architecture}: path networks of offroad-path; alias '{BEST}' is the best validation score"
+            name, description=f"{architecture} networks trained by offroad-path; alias '{BEST}' is the best validation score"
         )
     version = client.create_model_version(name, logged.model_uri, run_id=run_id, tags={} if score is None else {"score": str(score)})
     _mark_best(client, name, task.monitor, task.mode)

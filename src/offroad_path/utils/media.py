@@ -6,7 +6,6 @@ stage runner turns into one line and exit 2 (the stage's temporary folder is the
 from __future__ import annotations
 
 import errno
-import os
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -46,7 +45,7 @@ class VideoFile:
             readable = int(stored.get(cv2.CAP_PROP_FRAME_COUNT)) if stored.isOpened() else 0
         finally:
             stored.release()
-        if self.frames and (readable < self.frames or os.path.getsize(self.path) == 0):
+        if readable < self.frames:
             raise _not_written(self.path, f"the video ({readable} of {self.frames} frames readable)")
 
     def __enter__(self) -> VideoFile:

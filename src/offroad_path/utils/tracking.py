@@ -11,8 +11,9 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-# The experiment kind MLflow's dashboard opens an experiment as: model training (runs, models,
-# metrics), not GenAI development (traces), the default of MLflow 3 for an experiment without the tag.
+# The experiment's kind: model training (runs, models, metrics), not GenAI development (traces).
+# MLflow 3.17's UI opens experiments by its sidebar switch instead (?workflowType=machine_learning,
+# README "The dashboard"); the tag is what MLflow's APIs and UIs without that switch read.
 EXPERIMENT_KIND, MODEL_TRAINING = "mlflow.experimentKind", "custom_model_development"
 
 
