@@ -389,7 +389,7 @@ class PostprocessConfig:
 class SteeringFromPathsConfig:
     lookahead_m: float = setting(positive())  # pure pursuit's look-ahead distance from the rear axle
     steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree
-    pilotnet_predictions: str | None = MISSING  # train_steering's predictions.csv; None: no PilotNet row
+    pilotnet_predictions: str | None = MISSING  # train_steering's predictions.csv, {seed} for the seed; None: no PilotNet row
 
 
 @dataclass
@@ -408,6 +408,27 @@ class BootstrapConfig:
 
 
 @dataclass
+class PrimaryConfig:
+    """One primary question, declared before the run (offroad_path.evaluation.primaries)."""
+
+    claim: str = MISSING  # the claim it tests, in words
+    # Which comparison answers it: <section>/<key> of the report that owns it, e.g.
+    # uncertainty/unet-none_vs_segnet-none (evaluate) or steering/unet-segmentation_vs_pilotnet (drive).
+    compare: str = MISSING
+    # drive only: the planning rates (interventions per km, a then b) its power is computed from
+    planning_per_km: list[float] | None = None
+
+
+@dataclass
+class ConclusionsConfig:
+    """The primary questions and their family-wise error (Holm)."""
+
+    alpha: float = setting(between(0, 1, low_open=True, high_open=True))  # family-wise, two-sided
+    power: float = setting(between(0, 1, low_open=True, high_open=True))  # the drive's target power per primary
+    primaries: dict[str, PrimaryConfig] = field(default_factory=dict)
+
+
+@dataclass
 class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
@@ -420,6 +441,7 @@ class EvaluateConfig:
     train_manifest: str = MISSING  # for the mean-path prior
     temporal: TemporalConfig = field(default_factory=TemporalConfig)
     bootstrap: BootstrapConfig = field(default_factory=BootstrapConfig)
+    conclusions: ConclusionsConfig = field(default_factory=ConclusionsConfig)
     real_labels_dir: str | None = MISSING  # a label run of real footage: every network scored on it too (null: none)
     threshold: float = setting(between(0, 1))  # path where C > threshold
     pr_thresholds: int = setting(at_least(2))
@@ -455,6 +477,10 @@ class SteeringConfig:
     lock_deg: float = setting(positive())  # road-wheel angle of normalised steering 1, for errors in degrees
     steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree
     slip: bool = MISSING  # train on the steering the same drives take on world.slip's ground (train_steering_slip)
+    # angle: the normalised road-wheel angle (the thesis's PilotNet); curvature: the path's curvature
+    # normalised by the vehicle's tightest, so that another vehicle steers atan(wheelbase x curvature)
+    target: str = setting(one_of(["angle", "curvature"]))
+    wheelbase_m: float = setting(positive())  # the recording vehicle's, to turn a curvature into an angle
     metrics_path: str = MISSING
     plots_path: str = MISSING  # true and predicted steering per test frame
 
@@ -465,7 +491,8 @@ class DriveConfig:
 
     synthetic_dir: str = MISSING
     runs_dir: str = MISSING
-    pilotnets: dict[str, str] = MISSING  # end-to-end policy name -> train_steering checkpoint
+    seeds: list[int] = setting(each(at_least(0)))  # every policy drives once with each training seed's networks
+    pilotnets: dict[str, str] = MISSING  # end-to-end policy name -> train_steering checkpoint, {seed} for the seed
     out_dir: str = MISSING
     metrics_path: str = MISSING
     arguments: dict[str, list[str]] = MISSING  # steering | vehicle | traction -> policy names
@@ -596,15 +623,16 @@ def join_path(root: str, *parts: str) -> str:
     return os.path.normpath(os.path.join(os.path.expanduser(str(root)), *map(str, parts)))
 
 
-def steering_folder(slip: bool) -> str:
-    """The folder name of a PilotNet run: `steering`, or `steering_slip` for the slip targets (the
-    stage train_steering_slip), so that one never replaces the other's outputs by default."""
-    return "steering_slip" if slip else "steering"
+def steering_folder(slip: bool, target: str = "angle") -> str:
+    """The folder name of a PilotNet run: `steering`, `steering_slip` for the slip targets (the
+    stage train_steering_slip), `steering_curvature` for the curvature target, so that none
+    replaces another's outputs by default."""
+    return "steering" + ("_curvature" if target == "curvature" else "") + ("_slip" if slip else "")
 
 
-def steering_stage(slip: bool) -> str:
-    """The stage a PilotNet run is (its outputs' markers, its MLflow tag): train_steering or train_steering_slip."""
-    return f"train_{steering_folder(slip)}"
+def steering_stage(slip: bool, target: str = "angle") -> str:
+    """The stage a PilotNet run is (its outputs' markers, its MLflow tag): train_steering, train_steering_slip, ..."""
+    return f"train_{steering_folder(slip, target)}"
 
 
 def register_configs() -> None:
