@@ -6,7 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, mean, paired_interval
+from offroad_path.evaluation.bootstrap import (
+    Draws,
+    Interval,
+    Resampling,
+    block_sums,
+    interval,
+    mean,
+    paired_draws,
+    paired_interval,
+    score_draws,
+)
 from offroad_path.evaluation.scores import iou
 
 A = [60, 20, 900, 20]  # tp fp tn fn of one block: IoU 60 / 100 = 0.6
@@ -78,3 +88,64 @@ def test_too_few_blocks_or_mismatched_labels_are_refused():
         interval(np.array([A], float), iou)
     with pytest.raises(ValueError, match="3 items but 2 block labels"):
         block_sums(np.zeros((3, 4)), ["a", "b"])
+
+
+def _worlds_blocks_seeds(rng: np.random.Generator, world_sd: float, block_sd: float, seed_sd: float) -> tuple[np.ndarray, list[int]]:
+    """Per-seed block sums (3 seeds, 8 worlds of 3-7 blocks): the path rate of a block is 0.6 plus its
+    world's effect, its own and the training seed's; false positives and negatives 0.1-0.2 each."""
+    n_blocks = rng.integers(3, 8, 8)
+    world_of = np.repeat(np.arange(8), n_blocks)
+    size = rng.uniform(500, 1500, len(world_of))
+    effect = rng.normal(0, world_sd, 8)[world_of] + rng.normal(0, block_sd, len(world_of))
+    tp = size * np.clip(0.6 + effect[None, :] + rng.normal(0, seed_sd, 3)[:, None], 0.05, 0.95)  # (seeds, blocks)
+    fp, fn = (np.broadcast_to(size * rng.uniform(0.1, 0.2, len(world_of)), tp.shape) for _ in range(2))
+    return np.stack([tp, fp, np.zeros_like(tp), fn], axis=-1), list(world_of)
+
+
+def test_the_hierarchical_interval_covers_the_truth_when_worlds_and_seeds_vary():
+    """200 test sets whose worlds and training seeds shift every block of theirs (world sd 0.06,
+    block 0.05, seed 0.02 in the path rate): resampling worlds, then blocks, then seeds holds the
+    population's IoU in 92-98 % of them (95.5 % with these seeds); resampling blocks alone, as
+    if they were independent, in far fewer (76.5 %)."""
+    truth = 0.6 / (0.6 + 0.15 + 0.15)
+    hierarchical = flat = 0
+    for trial in range(200):
+        sums, worlds = _worlds_blocks_seeds(np.random.default_rng(2000 + trial), 0.06, 0.05, 0.02)
+        found = score_draws(sums, iou, Resampling(1000, seed=trial), worlds).interval()
+        hierarchical += found.low <= truth <= found.high
+        blocks_only = interval(sums.sum(axis=0), iou, Resampling(1000, seed=trial))
+        flat += blocks_only.low <= truth <= blocks_only.high
+    assert 0.92 <= hierarchical / 200 <= 0.98, hierarchical
+    assert flat / 200 < 0.85, flat
+
+
+def test_the_hierarchical_draw_resamples_worlds_then_their_blocks_then_seeds():
+    worlds = ["w0", "w0", "w0", "w1"]  # world w0 has three blocks, w1 one
+    blocks, seeds = Resampling(2000, seed=5).weights(worlds, seeds=3)
+    assert blocks.shape == (2000, 4) and seeds.shape == (2000, 3)
+    np.testing.assert_array_equal(seeds.sum(axis=1), 3)  # three seeds drawn each time
+    # Two worlds drawn: w0 twice (6 blocks), w0 and w1 (4) or w1 twice (2); w0's blocks come in threes.
+    assert set(blocks.sum(axis=1)) == {2.0, 4.0, 6.0}
+    np.testing.assert_array_equal(blocks[:, :3].sum(axis=1) % 3, 0)
+    assert (blocks[:, 3] % 1 == 0).all() and 0.2 < np.mean(blocks[:, 3] == 0) < 0.3  # w1 left out in 1 of 4
+
+
+def test_a_paired_difference_pairs_seed_by_seed_and_a_seedless_method_on_the_same_blocks():
+    rng = np.random.default_rng(6)
+    a = rng.integers(50, 500, (3, 10, 4)).astype(float)
+    worlds = [k // 2 for k in range(10)]
+    same = paired_draws(a, a, iou, Resampling(500, seed=1), worlds)
+    assert same.estimate == 0.0 and np.all(same.values == 0.0) and same.p_value() == 1.0
+    # A seedless method (a prior) on the same blocks: nothing between it and three identical seeds of it.
+    prior = a[0]
+    against = paired_draws(np.stack([prior] * 3), prior, iou, Resampling(500, seed=1), worlds)
+    np.testing.assert_allclose(against.values, 0.0, atol=1e-12)
+    # Seeds that differ add their spread: the seeded side's resamples move, the prior's counts do not.
+    assert np.std(paired_draws(a, prior, iou, Resampling(500, seed=1), worlds).values) > 0
+
+
+def test_a_bootstrap_p_value_is_the_level_at_which_the_interval_reaches_zero():
+    values = np.concatenate([np.full(30, -1.0), np.full(970, 1.0)])  # 3 % of resamples at or below 0
+    found = Draws(1.0, values, Resampling(1000))
+    assert found.p_value() == pytest.approx(0.06)
+    assert found.interval(0.95).low < 0 < found.interval(0.90).low

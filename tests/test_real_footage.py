@@ -1,5 +1,6 @@
 """Real-footage rows: a trained network and the mean-path prior scored on the real KITTI snippet's
-VO labels, against each frame's own label and against the other frames' labels."""
+VO labels, against each frame's own label, against the other frames' labels, and by the
+label-centred gain (0 for any constant prediction)."""
 
 from __future__ import annotations
 
@@ -45,7 +46,11 @@ def test_a_network_and_the_prior_on_the_real_snippet(kitti_labels, trained, tmp_
     assert rows["mean_path_prior"].non_corresponding_iou == pytest.approx(per_image_iou(per_image).mean(), abs=2e-3)
     net = rows["unet-none"]
     assert 0 <= net.iou <= 1 and 0 <= net.non_corresponding_iou <= 1
-    assert net.perception == pytest.approx(net.iou - net.non_corresponding_iou)
+    assert -1 <= net.gain <= 1 and net.gain_low <= net.gain <= net.gain_high
+    assert frames.poses == "the label stage's visual odometry"
+    # The prior paints the same path on every frame: its label-centred gain is 0, exactly, with its interval.
+    prior_row = rows["mean_path_prior"]
+    assert (prior_row.gain, prior_row.gain_low, prior_row.gain_high) == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
     # The snippet's labels (a gentle road) look alike: a perfect predictor could gain 1 - diversity at most.
     s = separability(frames, rows)
     assert 0.9 < s.diversity < 1 and s.largest_gain == pytest.approx(1 - s.diversity)
@@ -53,25 +58,27 @@ def test_a_network_and_the_prior_on_the_real_snippet(kitti_labels, trained, tmp_
 
 def hand_frames(labels: list[list[int]], direction: list[int], blocks: list[int]) -> RealFrames:
     n = len(labels)
-    return RealFrames("hand", [np.zeros((1, 4, 3), np.uint8)] * n, np.array(labels, bool)[:, None, :],
+    return RealFrames("hand", "hand-made", [np.zeros((1, 4, 3), np.uint8)] * n, np.array(labels, bool)[:, None, :],
                       [("s", i) for i in range(n)], [("s", b) for b in blocks], direction)  # fmt: skip
 
 
-def test_diversity_gain_and_the_shuffled_control_by_hand():
+def test_diversity_and_the_label_centred_gain_by_hand():
     from offroad_path.evaluation.bootstrap import Resampling
     from offroad_path.evaluation.real import real_row, separability
 
     frames = hand_frames([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 1], [0, 1, 1, 0]], direction=[-1, -1, 1, 0], blocks=[0, 0, 1, 1])
     perfect = real_row("perfect", frames.labels, frames, Resampling(1000, 0))
-    # Pairs of different frames: IoU 1, 0, 1/3, 0, 1/3, 1/3; of different bend directions: 0, 1/3, 0, 1/3, 1/3.
-    assert (perfect.iou, perfect.non_corresponding_iou, perfect.other_direction_iou) == pytest.approx((1.0, 1 / 3, 1 / 5))
-    # Per-frame gains 5/9, 5/9, 8/9, 6/9 in blocks {0, 1} and {2, 3}: resamples of two blocks give 5/9, 2/3 or 7/9.
-    assert (perfect.perception_low, perfect.perception_high) == pytest.approx((5 / 9, 7 / 9))
+    # Pairs of different frames: IoU 1, 0, 1/3, 0, 1/3, 1/3.
+    assert (perfect.iou, perfect.non_corresponding_iou) == pytest.approx((1.0, 1 / 3))
+    # Label by label, 1 minus the mean IoU of the other-bending frames' predictions against it: label 0
+    # (left) against frames 2 and 3: 0 and 1/3, gain 5/6; label 1 the same; label 2 (right) against 0, 1, 3:
+    # 0, 0, 1/3, gain 8/9; label 3 (straight) against 0, 1, 2: 1/3 each, gain 2/3. Mean 29/36; blocks {0, 1}
+    # and {2, 3} hold means 5/6 and 7/9, so resamples give 7/9, 29/36 or 5/6.
+    assert (perfect.gain, perfect.gain_low, perfect.gain_high) == pytest.approx((29 / 36, 7 / 9, 5 / 6))
     constant = real_row("prior", np.broadcast_to(frames.labels[0], frames.labels.shape), frames, Resampling(1000, 0))
-    # A painted prior ([1, 1, 0, 0] on every frame) matches labels bending another way as well as its own:
-    # ordered pairs of other directions 0, 1/3, 0, 1/3, 1, 1, 1/3, 1, 1, 0; per-frame gains 5/9, 5/9, -7/9, -1/3.
-    assert constant.other_direction_iou == pytest.approx(0.5) and constant.other_direction_iou >= constant.iou == pytest.approx(5 / 11)
-    assert (constant.perception_low, constant.perception_high) == pytest.approx((-5 / 9, 5 / 9))  # blocks: +5/9, -5/9 or 0
+    # A painted prior ([1, 1, 0, 0] on every frame) scores every label the same whichever frame it came from.
+    assert constant.iou == pytest.approx(5 / 11)
+    assert (constant.gain, constant.gain_low, constant.gain_high) == (0.0, 0.0, 0.0)
     # The prior's IoU over blocks {0, 1} (tp, fp, fn: 4, 0, 0) and {2, 3} (1, 3, 3): 1, 5/11 or 1/7.
     assert (constant.iou_low, constant.iou_high) == pytest.approx((1 / 7, 1.0))
     s = separability(frames, {"perfect": perfect, "mean_path_prior": constant})
@@ -82,10 +89,10 @@ def test_diversity_gain_and_the_shuffled_control_by_hand():
             ("mean_path_prior", np.broadcast_to(wide.labels[0], wide.labels.shape)))}  # fmt: skip
     opposite = separability(wide, rows)  # labels 0 or 1 alike; the prior scores 0.5 in every block
     assert (opposite.diversity, opposite.width) == pytest.approx((1 / 3, 0.0)) and opposite.separable
-    assert rows["perfect"].other_direction_iou == 0 and rows["mean_path_prior"].other_direction_iou == pytest.approx(0.5)
+    assert rows["perfect"].gain == 1.0 and rows["mean_path_prior"].gain == 0.0
     assert "The recording can separate perception from a prior." in opposite.sentence()
     same = hand_frames([[1, 1, 0, 0]] * 4, direction=[0, 0, 0, 0], blocks=[0, 0, 1, 1])
     row = real_row("perfect", same.labels, same, Resampling(1000, 0))
     alike = separability(same, {"perfect": row})
-    assert alike.largest_gain == 0 and np.isnan(row.other_direction_iou) and not alike.separable
+    assert alike.largest_gain == 0 and np.isnan(row.gain) and not alike.separable
     assert "cannot separate perception from a prior" in alike.sentence()

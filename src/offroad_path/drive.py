@@ -28,12 +28,13 @@ log = logging.getLogger("offroad_path.drive")
 
 def outputs(cfg: DictConfig) -> Outputs:
     drive = cfg.drive
-    inputs = [drive.synthetic_dir, drive.runs_dir, *drive.pilotnets.values()]
+    pilotnets = [str(path).replace("{seed}", str(seed)) for path in drive.pilotnets.values() for seed in drive.seeds]
+    inputs = [drive.synthetic_dir, drive.runs_dir, *pilotnets]
     return Outputs("drive", folders={"drive.out_dir": drive.out_dir}, files={"drive.metrics_path": drive.metrics_path}, inputs=inputs)
 
 
-def check_policies(d: DictConfig, seed: int) -> None:
-    """Every argument is known and every policy's checkpoint exists, before any world is built."""
+def check_policies(d: DictConfig) -> None:
+    """Every argument is known and every policy's checkpoint exists for every seed, before any world is built."""
     from offroad_path.driving.report import ARGUMENTS
     from offroad_path.driving.worlds import BUILT_IN, TEMPORAL, checkpoint_of, pilotnet_checkpoint
 
@@ -46,38 +47,37 @@ def check_policies(d: DictConfig, seed: int) -> None:
             base = name.removesuffix(TEMPORAL)
             if name != base and (base in BUILT_IN or base in d.pilotnets):
                 raise ValueError(f"drive.arguments.{argument}: {name!r}: the temporal filter is for path networks only")
-            checkpoint = checkpoint_of(name, d, seed)
-            if checkpoint is not None and not checkpoint.is_file():
-                known = ", ".join([*d.pilotnets, *BUILT_IN])
-                raise FileNotFoundError(
-                    f"drive.arguments.{argument}: policy {name!r} needs {checkpoint}, which does not exist "
-                    f"(policies: a run name of the train stage, that name{TEMPORAL}, or {known})"
-                )
-            if base in d.pilotnets:
-                pilotnet_checkpoint(checkpoint)  # a path network's checkpoint given as PilotNet: refused here, not after work
+            for seed in d.seeds:
+                checkpoint = checkpoint_of(name, d, seed)
+                if checkpoint is not None and not checkpoint.is_file():
+                    known = ", ".join([*d.pilotnets, *BUILT_IN])
+                    raise FileNotFoundError(
+                        f"drive.arguments.{argument}: policy {name!r} needs {checkpoint} (seed {seed} of drive.seeds), which does "
+                        f"not exist (policies: a run name of the train stage, that name{TEMPORAL}, or {known})"
+                    )
+                if base in d.pilotnets:
+                    pilotnet_checkpoint(checkpoint)  # a path network's checkpoint given as PilotNet: refused here, not after work
 
 
-@reads("drive", "world", "postprocess", "label", "mlflow", writes=outputs)
+@reads("drive", "world", "postprocess", "label", "evaluate", "mlflow", writes=outputs)
 def run_drive(cfg: DictConfig) -> dict:
     # The networks and the renderer (torch among them) once the config and outputs are checked.
     from offroad_path.driving.loop import DriveLog
-    from offroad_path.driving.report import ARGUMENTS, report
+    from offroad_path.driving.report import ARGUMENTS, check_arguments_primaries, report
     from offroad_path.driving.worlds import WorldJob, check_worlds, drive_params, drive_world, test_worlds
 
     drive = cfg.drive
-    check_policies(drive, cfg.seed)
+    check_policies(drive)
+    check_arguments_primaries(cfg.evaluate.conclusions, drive)
     worlds = test_worlds(Path(drive.synthetic_dir), drive.worlds)
     check_worlds(worlds, cfg.world, drive)
-    if len(worlds) * drive.starts_per_world < 2:
-        raise ValueError(
-            f"drive.starts_per_world: {len(worlds)} test world(s) x {drive.starts_per_world} start(s) is one drive; "
-            "intervals need at least 2 (more starts, or more test worlds)"
-        )
+    if len(worlds) < 2:
+        raise ValueError(f"drive.worlds: {len(worlds)} test world is too few; the intervals resample worlds and need at least 2")
     params = drive_params(cfg.postprocess, drive.width, cfg.world.width)
     started = time.perf_counter()
     with atomic_directory(drive.out_dir, "drive", key="drive.out_dir") as tmp:
         jobs = [
-            WorldJob(w, cfg.world, drive, cfg.seed, params, cfg.label.disparity, str(tmp), drive.video and i == 0)
+            WorldJob(w, cfg.world, drive, tuple(drive.seeds), params, cfg.label.disparity, str(tmp), drive.video and i == 0)
             for i, w in enumerate(worlds)
         ]
         results = map_processes(drive_world, jobs, drive.workers, [f"test world {w.folder}" for w in worlds])
@@ -85,7 +85,7 @@ def run_drive(cfg: DictConfig) -> dict:
         for per_world in results:
             for argument, g in per_world:
                 logs[argument].setdefault(g.policy, []).append(g)
-        markdown, metrics = report(logs, drive, [w.name for w in worlds])
+        markdown, metrics = report(logs, drive, [w.name for w in worlds], cfg.evaluate.conclusions)
         (tmp / "results.md").write_text(markdown)
         (tmp / "drive.json").write_text(json.dumps(metrics, indent=2) + "\n")
     write_text_atomic(drive.metrics_path, json.dumps(metrics, indent=2) + "\n", "drive")

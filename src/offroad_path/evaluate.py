@@ -41,7 +41,11 @@ def outputs(cfg: DictConfig) -> Outputs:
         evaluate_cfg.labels_dir,
         Path(evaluate_cfg.train_manifest).parent,
         *manifest_folders(evaluate_cfg.train_manifest),
-        evaluate_cfg.steering_from_paths.pilotnet_predictions,
+        *(
+            pilotnet.replace("{seed}", str(seed))
+            for seed in evaluate_cfg.seeds
+            if (pilotnet := evaluate_cfg.steering_from_paths.pilotnet_predictions)
+        ),
         *(label_run_folders(evaluate_cfg.real_labels_dir) if evaluate_cfg.real_labels_dir else []),
     ]
     folders = {"evaluate.out_dir": evaluate_cfg.out_dir, "evaluate.plots_dir": evaluate_cfg.plots_dir}
@@ -52,19 +56,30 @@ def outputs(cfg: DictConfig) -> Outputs:
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
     # The work's modules (torch among them) once the config and outputs are checked: a refusal is fast.
     from offroad_path.evaluation.report import TestSet, write_report
-    from offroad_path.evaluation.sections import Baselines, ByCondition, RealFootage, ResultsTable, SteeringFromPaths, Temporal
+    from offroad_path.evaluation.sections import (
+        Baselines,
+        ByCondition,
+        PrimaryQuestions,
+        RealFootage,
+        ResultsTable,
+        SteeringFromPaths,
+        Temporal,
+    )
     from offroad_path.evaluation.uncertainty import Uncertainty, test_bootstrap
 
     evaluate_cfg = cfg.evaluate
+    check_primaries(evaluate_cfg)
     test = TestSet.read(evaluate_cfg)
     results = ResultsTable()
     bootstrap = test_bootstrap(evaluate_cfg, test.samples, cfg.split.block_m)
+    uncertainty, steering = Uncertainty(bootstrap, cfg.split.block_m), SteeringFromPaths(evaluate_cfg, bootstrap)
     # The report, section by section, in the order of results.md and metrics.json.
     sections: list[Section] = [
         results,
-        Uncertainty(bootstrap, cfg.split.block_m),
+        uncertainty,
         Baselines(),
-        SteeringFromPaths(evaluate_cfg, bootstrap),
+        steering,
+        PrimaryQuestions(evaluate_cfg, uncertainty, steering),
         ByCondition(bootstrap),
         Temporal(evaluate_cfg, cfg.label, cfg.split.block_m),
         RealFootage(evaluate_cfg, bootstrap, cfg.split.block_m, cfg.label.distance_m),
@@ -74,6 +89,15 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
     write_report(evaluate_cfg, test, sections, results.table(), results.figures(test, evaluate_cfg.figure_cases, evaluate_cfg.figure_scale))
     log_to_mlflow(cfg, sections, results.table())
     return results.table()
+
+
+def check_primaries(e: DictConfig) -> None:
+    """Each primary evaluate answers names a comparison this run makes (before any work)."""
+    from offroad_path.evaluation.primaries import check_declared
+    from offroad_path.evaluation.uncertainty import comparisons
+
+    keys = {"uncertainty": {key for key, *_ in comparisons(list(e.runs))}, "steering_from_paths": {f"{run}_vs_pilotnet" for run in e.runs}}
+    check_declared(e.conclusions.primaries, keys)
 
 
 def training_runs(cfg: DictConfig) -> dict[str, str]:

@@ -3,6 +3,7 @@ of the training sequences, tested on the path split's held-out stretches (see of
 
     python -m offroad_path.train_steering [steering.lr=2e-4] [steering.max_epochs=30]
     python -m offroad_path.train_steering steering.slip=true  # slippery ground: data/steering_slip/seed0 (train_steering_slip)
+    python -m offroad_path.train_steering steering.target=curvature  # data/steering_curvature/seed0 (train_steering_curvature)
 
 Writes steering.out_dir (data/steering/seed<seed>; steering_slip/ with slip): checkpoints/best.ckpt,
 metrics.json, predictions.csv (true and predicted angle per test frame), error_by_magnitude.csv, scatter.png (the thesis's Fig. 5.4);
@@ -27,9 +28,9 @@ def outputs(cfg: DictConfig) -> Outputs:
     steering = cfg.steering
     inputs = [*label_run_folders(steering.labels_dir), steering.split_dir, *manifest_folders(Path(steering.split_dir) / "train.csv")]
     files = {"steering.metrics_path": steering.metrics_path, "steering.plots_path": steering.plots_path}
-    # Two stages in dvc.yaml (train_steering, train_steering_slip): neither replaces the other's outputs.
+    # Three stages in dvc.yaml (train_steering, _slip, _curvature): none replaces another's outputs.
     return Outputs(
-        steering_stage(steering.slip),
+        steering_stage(steering.slip, steering.target),
         folders={"steering.out_dir": steering.out_dir},
         files=files,
         inputs=inputs,

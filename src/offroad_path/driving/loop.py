@@ -37,6 +37,8 @@ class DriveLog:
     policy: str
     world: str
     start_s: float
+    start: int = 0  # which of the world's starts
+    seed: int = 0  # the training seed of the policy's network
     elapsed_s: float = 0.0
     distance_m: float = 0.0  # driven
     progress_m: float = 0.0  # along the reference drive, interventions' skips included: the same for every policy that finishes

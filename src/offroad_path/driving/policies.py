@@ -15,6 +15,7 @@ turns right), or None when it has nothing to say (no path predicted: the vehicle
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -114,6 +115,9 @@ class PilotNetPolicy(Policy):
     width: int
     height: int
     name: str = "pilotnet"  # drive.pilotnets' key
+    # 1/m of output 1 for a PilotNet that predicts curvature (steering.target=curvature); None: it
+    # predicts the normalised angle, which is scaled by this vehicle's lock
+    max_curvature: float | None = None
 
     def __post_init__(self) -> None:
         self._prepare = steering_transforms(jitter=0.0, seed=0)
@@ -124,7 +128,10 @@ class PilotNetPolicy(Policy):
         batch = self._prepare(image=image)["image"][None]  # (1, 3, H, W)
         with torch.no_grad():
             normalised = float(self.task(batch)[0])
-        return normalised * frame.vehicle.lock_rad
+        if self.max_curvature is None:
+            return normalised * frame.vehicle.lock_rad
+        # As pure pursuit steers any vehicle along a path: its own wheelbase times the curvature.
+        return math.atan(frame.vehicle.geometry.wheelbase_m * normalised * self.max_curvature)
 
 
 @dataclass

@@ -1,12 +1,15 @@
-"""Scores of closed-loop drives, with block-bootstrap intervals across drives (a world and a start
-point each, the unit resampled: offroad_path.evaluation.bootstrap), and the report's tables.
+"""Scores of closed-loop drives, with hierarchical-bootstrap intervals (the test worlds, then the
+starts within each drawn world, then the training seeds: offroad_path.evaluation.bootstrap), the
+exact test of each primary comparison's counts (driving.counts), and the report's tables.
 
 Per policy: interventions per km of route (progress along the reference drive, the same for every
 policy that finishes its drives, so that a paired difference is one of counts alone); autonomy,
 1 - interventions x intervention_s / elapsed time (Bojarski et al. 2016; below 0 when interventions
 come faster than one per intervention_s); the mean and 95th-percentile lateral offset from the
 nearest centre line; water entries per km. Each path policy is compared with each end-to-end one on
-the same drives, paired: the interval of the difference in interventions per km.
+the same drives, paired: the interval of the difference in interventions per km (exploratory). The
+primaries of evaluate.conclusions that name an argument get the exact test, their interval at every
+Holm level, and the route their planning rates need for the target power (evaluation.primaries).
 """
 
 from __future__ import annotations
@@ -15,8 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.driving.counts import compare_rates, power_sentence, route_needed
 from offroad_path.driving.loop import DriveLog
-from offroad_path.evaluation.bootstrap import Interval, Resampling, paired_interval
+from offroad_path.evaluation.bootstrap import Interval, Resampling, drawn, paired_draws, whole
+from offroad_path.evaluation.primaries import holm_levels, owned, recorded
 
 ARGUMENTS = {
     "steering": "(a) closed loop: does predicting the path drive better than predicting the steering?",
@@ -30,9 +35,19 @@ def _per_km(s: np.ndarray) -> np.ndarray:  # (..., k) sums with interventions at
         return np.where(s[..., 1] > 0, 1000.0 * s[..., 0] / np.where(s[..., 1] > 0, s[..., 1], 1), np.nan)
 
 
-def sums(logs: list[DriveLog]) -> np.ndarray:
-    """(drives, 5): interventions, metres of route, seconds, summed offsets, steps; one row per drive."""
-    return np.array([[len(g.interventions), g.progress_m, g.elapsed_s, sum(g.offsets), g.steps] for g in logs], float)
+def ordered(logs: list[DriveLog]) -> list[DriveLog]:
+    """A policy's drives in the order every policy's are paired in: seed, world, start."""
+    return sorted(logs, key=lambda g: (g.seed, g.world, g.start))
+
+
+def sums(logs: list[DriveLog]) -> tuple[np.ndarray, list[str]]:
+    """(seeds, drives per seed, 5): interventions, metres of route, seconds, summed offsets, steps; and
+    the world of each drive (a world and a start), for the hierarchical draw."""
+    logs = ordered(logs)
+    seeds = sorted({g.seed for g in logs})
+    rows = np.array([[len(g.interventions), g.progress_m, g.elapsed_s, sum(g.offsets), g.steps] for g in logs], float)
+    per_seed = rows.reshape(len(seeds), -1, 5)
+    return per_seed, [g.world for g in logs[: per_seed.shape[1]]]
 
 
 @dataclass(frozen=True)
@@ -70,38 +85,76 @@ class PolicyScore:
 
 
 def score(logs: list[DriveLog], intervention_s: float, resampling: Resampling) -> PolicyScore:
-    """One policy's drives (one per world and start, in a fixed order) scored with intervals."""
-    s = sums(logs)
-    index = resampling.indices(len(logs))  # (count, drives)
-    drawn = s[index].sum(axis=1)  # (count, 5)
+    """One policy's drives (one per seed, world and start) scored with hierarchical intervals."""
+    s, worlds = sums(logs)
+    blocks, seeds = resampling.weights(worlds, s.shape[0])  # (count, drives), (count, seeds)
+    resampled = drawn(s, blocks, seeds)  # (count, 5)
 
     def ratio(fn) -> Interval:
-        return Interval(float(fn(s.sum(axis=0))), *resampling.percentiles(fn(drawn)))
+        return Interval(float(fn(whole(s))), *resampling.percentiles(fn(resampled)))
 
+    logs = ordered(logs)
     offsets = [np.asarray(g.offsets) for g in logs]
-    p95 = np.array([np.percentile(np.concatenate([offsets[i] for i in row]), 95) for row in index])
     causes = [why for g in logs for _, _, why in g.interventions]
+    total = whole(s)
     return PolicyScore(
         policy=logs[0].policy,
         drives=len(logs),
-        route_m=float(s[:, 1].sum()),
+        route_m=float(total[1]),
         distance_m=sum(g.distance_m for g in logs),
-        interventions=int(s[:, 0].sum()),
+        interventions=int(total[0]),
         per_km=ratio(_per_km),
         autonomy_pct=ratio(lambda c: 100.0 * (1.0 - c[..., 0] * intervention_s / c[..., 2])),
         mean_offset_m=ratio(lambda c: c[..., 3] / c[..., 4]),
-        p95_offset_m=Interval(float(np.percentile(np.concatenate(offsets), 95)), *resampling.percentiles(p95)),
-        water_per_km=1000.0 * sum(g.water_entries for g in logs) / max(float(s[:, 1].sum()), 1e-9),  # per km of route
+        p95_offset_m=Interval(float(np.percentile(np.concatenate(offsets), 95)), *resampling.percentiles(_p95(offsets, blocks, seeds))),
+        water_per_km=1000.0 * sum(g.water_entries for g in logs) / max(float(total[1]), 1e-9),  # per km of route
         no_path_steps=sum(g.no_path for g in logs),
         by_cause={why: causes.count(why) for why in sorted(set(causes))},
     )
 
 
+def _p95(offsets: list[np.ndarray], blocks: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """The 95th percentile of the offsets each resample draws (drive k of seed s weighted by how
+    often the draw takes its world-start and its seed): (count,)."""
+    per_seed = len(offsets) // seeds.shape[1]
+    values = np.concatenate(offsets)
+    drive = np.repeat(np.arange(len(offsets)), [len(o) for o in offsets])
+    order = np.argsort(values, kind="stable")
+    values, drive = values[order], drive[order]
+    weight = (seeds[:, drive // per_seed] * blocks[:, drive % per_seed]).cumsum(axis=1)  # (count, values)
+    at = np.array([np.searchsorted(row, 0.95 * row[-1]) for row in weight])
+    return values[np.minimum(at, len(values) - 1)]
+
+
 def versus_end_to_end(logs: dict[str, list[DriveLog]], end_to_end: list[str], resampling: Resampling) -> dict[tuple[str, str], Interval]:
-    """{(path policy, PilotNet policy): path's interventions per km minus PilotNet's}, paired on the same drives."""
+    """{(path policy, PilotNet policy): path's interventions per km minus PilotNet's}, paired on the same
+    drives and seeds (exploratory: the primaries get the exact test)."""
     pilots = [name for name in logs if name in end_to_end]
     paths = [name for name in logs if name not in end_to_end and name not in ("oracle", "straight")]
-    return {(a, b): paired_interval(sums(logs[a]), sums(logs[b]), _per_km, resampling) for b in pilots for a in paths}
+    found = {}
+    for b in pilots:
+        for a in paths:
+            (sums_a, worlds), (sums_b, _) = sums(logs[a]), sums(logs[b])
+            found[a, b] = paired_draws(sums_a, sums_b, _per_km, resampling, worlds).interval()
+    return found
+
+
+def primary(logs: dict[str, list[DriveLog]], name: str, key: str, conclusions) -> dict:
+    """A primary's entry (evaluation.primaries.recorded): the exact test of a's and b's pooled counts,
+    the rate ratio a / b at every Holm level (null 1), and with planning rates the route each policy
+    drove against the route their power needs at Holm's strictest level (alpha / family). key: a_vs_b."""
+    a, _, b = key.partition("_vs_")
+    family, planning = len(conclusions.primaries), conclusions.primaries[name].planning_per_km
+    (sums_a, _), (sums_b, _) = sums(logs[a]), sums(logs[b])
+    total_a, total_b = whole(sums_a), whole(sums_b)
+    test = compare_rates(int(total_a[0]), int(total_b[0]), total_a[1] / 1000.0, total_b[1] / 1000.0)
+    intervals = [[round(v, 6) for v in test.ratio_interval(level)] for level in holm_levels(conclusions.alpha, family)]
+    entry = recorded(test.ratio, test.p_value, intervals, null=1.0) | {"interventions": [test.a, test.b]}
+    entry["route_m"] = round(min(total_a[1], total_b[1]), 1)
+    if planning:
+        needed = route_needed(planning[0], planning[1], conclusions.alpha / family, conclusions.power)
+        entry["route_needed_m"] = round(needed * 1000.0, 1) if needed != float("inf") else None
+    return entry
 
 
 def table(scores: list[PolicyScore]) -> str:
@@ -138,19 +191,22 @@ def finding(comparisons: dict[tuple[str, str], Interval]) -> str:
     return "Path prediction + pure pursuit against end-to-end steering, paired on the same drives: " + "; ".join(parts) + "."
 
 
-def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str]) -> tuple[str, dict]:
-    """results.md and the metrics of every argument's drives (logs: argument -> policy -> drives in
-    world and start order; d: the drive config)."""
+def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str], conclusions) -> tuple[str, dict]:
+    """results.md and the metrics of every argument's drives (logs: argument -> policy -> drives; d:
+    the drive config; conclusions: evaluate.conclusions, whose primaries naming an argument are tested here)."""
     resampling = Resampling(d.bootstrap.resamples, d.bootstrap.seed, d.bootstrap.level)
-    drives = len(worlds) * d.starts_per_world
+    seeds = list(d.seeds)
     water = ", or into water" if d.water_intervenes else ""
     sections = [
-        f"# Closed-loop driving\n\n{len(worlds)} test worlds x {d.starts_per_world} start(s), {d.length_m:g} m of route each, "
-        f"at {d.speed_mps:g} m/s with {d.rate_hz:g} Hz control; {100 * d.bootstrap.level:g} % intervals by resampling the "
-        f"{drives} drives ({d.bootstrap.resamples} resamples). An intervention: the body more than {d.corridor_m:g} m from "
-        f"every centre line (track, forks, reference drive), or into an object{water}.\n"
+        f"# Closed-loop driving\n\n{len(worlds)} test worlds x {d.starts_per_world} start(s) x {len(seeds)} training seed(s) "
+        f"({', '.join(map(str, seeds))}), {d.length_m:g} m of route each, at {d.speed_mps:g} m/s with {d.rate_hz:g} Hz control; "
+        f"{100 * d.bootstrap.level:g} % hierarchical-bootstrap intervals ({d.bootstrap.resamples} resamples: the worlds drawn with "
+        "replacement, then the starts within each, then the seeds; every policy on the same draw). An intervention: the body "
+        f"more than {d.corridor_m:g} m from every centre line (track, forks, reference drive), or into an object{water}.\n"
     ]
     metrics: dict = {}
+    mine = owned(conclusions.primaries, tuple(ARGUMENTS))
+    primaries: dict[str, dict] = {}
     for argument, by_policy in logs.items():
         scores = [score(group, d.intervention_s, resampling) for group in by_policy.values()]
         comparisons = versus_end_to_end(by_policy, list(d.pilotnets), resampling)
@@ -162,6 +218,33 @@ def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str]) -> 
             },
             "finding": sentence,
         }
-        sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores)}\n\n{comparison_table(comparisons)}\n\n{sentence}\n")
-    metrics["drives"] = {"worlds": worlds, "starts_per_world": d.starts_per_world, "length_m": d.length_m}
+        sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores)}\n\n{comparison_table(comparisons)}\n\nExploratory: {sentence}\n")
+        for name, (section, key) in mine.items():
+            if section == argument:
+                primaries[name] = primary(by_policy, name, key, conclusions)
+                sections.append(_primary_text(name, conclusions, primaries[name]))
+    metrics["drives"] = {"worlds": worlds, "starts_per_world": d.starts_per_world, "seeds": seeds, "length_m": d.length_m}
+    if primaries:
+        metrics["primaries"] = primaries
     return "".join(sections), metrics
+
+
+def _primary_text(name: str, conclusions, entry: dict) -> str:
+    a, b = entry["interventions"]
+    low, high = entry["intervals"][0]
+    power = power_sentence(entry, conclusions.power)
+    return (
+        f"\n**Primary `{name}`** ({conclusions.primaries[name].claim}): {a} against {b} interventions over "
+        f"{entry['route_m']:.0f} m of route each; rate ratio {entry['estimate']:.2f} [95 %: {low:.2f}, {high:.2f}], exact "
+        f"two-sided p = {entry['p_value']:.4f} (uncorrected; the README draws the family's Holm verdicts)"
+        + (f"; {power}" if power else "")
+        + ".\n"
+    )
+
+
+def check_arguments_primaries(conclusions, d) -> None:
+    """Each primary naming an argument compares two of that argument's policies (before any drive)."""
+    from offroad_path.evaluation.primaries import check_declared
+
+    available = {argument: {f"{a}_vs_{b}" for a in names for b in names if a != b} for argument, names in d.arguments.items()}
+    check_declared(conclusions.primaries, {a: available.get(a, set()) for a in ARGUMENTS})

@@ -86,11 +86,12 @@ def checkpoint_of(name: str, d, seed: int) -> Path | None:
     if name in ("oracle", "straight"):
         return None
     if name in d.pilotnets:
-        return Path(d.pilotnets[name])
+        return Path(str(d.pilotnets[name]).replace("{seed}", str(seed)))
     return Path(d.runs_dir) / name.removesuffix(TEMPORAL) / f"seed{seed}" / "checkpoints" / "best.ckpt"
 
 
 PILOTNET_KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")
+PILOTNET_TARGET_KEYS = ("target", "lock_deg", "wheelbase_m")  # a curvature PilotNet's (absent from older checkpoints: angle)
 
 
 def pilotnet_checkpoint(path: Path) -> dict:
@@ -114,9 +115,9 @@ def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
 
         saved = pilotnet_checkpoint(checkpoint_of(name, d, seed))
         hp = saved["hyper_parameters"]
-        task = SteeringTask(**{k: hp[k] for k in PILOTNET_KEYS})
+        task = SteeringTask(**{k: hp[k] for k in PILOTNET_KEYS}, **{k: hp[k] for k in PILOTNET_TARGET_KEYS if k in hp})
         load_weights(task, checkpoint_of(name, d, seed), saved)
-        return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]), name)
+        return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]), name, task.max_curvature)
     from offroad_path.inference.runners import TorchModel
 
     model = TorchModel(checkpoint_of(name, d, seed))
@@ -129,7 +130,7 @@ class WorldJob:
     world: TestWorld
     world_cfg: object  # the world config node the test worlds were rendered with
     drive_cfg: object  # the drive config
-    training_seed: int
+    training_seeds: tuple[int, ...]  # every policy drives every start once with each seed's networks
     postprocess: PostprocessParams  # sized for the drive's camera
     disparity: object  # label.disparity
     out_dir: str  # the stage's temporary output folder
@@ -141,38 +142,41 @@ def _geometry(v) -> VehicleGeometry:
 
 
 def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
-    """Every argument's policies from every start in one world: (argument, log) in a fixed order."""
+    """Every argument's policies from every start with every training seed in one world: (argument,
+    log) in a fixed order (seed, argument, policy, start); the plots and the video show the first seed."""
     cv2.setNumThreads(1)  # one process per core
     torch.set_num_threads(1)
     d, world = job.drive_cfg, rebuild_world(job.world_cfg, Path(job.world.folder))
     camera = PinholeCamera.from_fov(d.width, d.height, job.world_cfg.hfov_deg)
     matcher = sgbm(job.disparity)
     settings = LoopSettings(d.rate_hz, d.speed_mps, d.length_m, d.respawn_m, d.timeout_factor, d.water_intervenes)
-    policies: dict[str, Policy] = {}
     out: list[tuple[str, DriveLog]] = []
     slip = _slip(world, job) if "traction" in d.arguments else None
-    for argument, names in d.arguments.items():
-        geometry = _geometry(d.other_vehicle) if argument == "vehicle" else vehicle_geometry(job.world_cfg)
-        course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
-        rig = StereoRig(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
-        usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)
-        starts = [usable * k / d.starts_per_world for k in range(d.starts_per_world)]
-        logs: dict[str, list[DriveLog]] = {}
-        for name in names:
-            if name not in policies:
-                policies[name] = make_policy(name, d, job.training_seed, job.postprocess)
-            policy = policies[name]
-            for k, start in enumerate(starts):
-                yaw = _yaw_factor(world, slip, job.world.seed, k) if argument == "traction" else None
-                setup = Setup(course, Vehicle(geometry, d.steering_rate_deg_s, yaw), rig, settings)
-                video = job.video and argument == "steering" and k == 0
-                log = drive(setup, policy, start, video)
-                log.world = job.world.name
-                if video:
-                    _write_video(log, Path(job.out_dir) / "videos" / f"{name}.mp4", d.rate_hz)
-                logs.setdefault(name, []).append(log)
-                out.append((argument, log))
-        plot_world(world, course, logs, Path(job.out_dir) / "trajectories" / argument / f"{job.world.name}.png")
+    for seed in job.training_seeds:
+        first = seed == job.training_seeds[0]
+        policies: dict[str, Policy] = {}
+        for argument, names in d.arguments.items():
+            geometry = _geometry(d.other_vehicle) if argument == "vehicle" else vehicle_geometry(job.world_cfg)
+            course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
+            rig = StereoRig(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
+            usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)
+            starts = [usable * k / d.starts_per_world for k in range(d.starts_per_world)]
+            logs: dict[str, list[DriveLog]] = {}
+            for name in names:
+                if name not in policies:
+                    policies[name] = make_policy(name, d, seed, job.postprocess)
+                for k, start in enumerate(starts):
+                    yaw = _yaw_factor(world, slip, job.world.seed, k) if argument == "traction" else None
+                    setup = Setup(course, Vehicle(geometry, d.steering_rate_deg_s, yaw), rig, settings)
+                    video = first and job.video and argument == "steering" and k == 0
+                    log = drive(setup, policies[name], start, video)
+                    log.world, log.start, log.seed = job.world.name, k, seed
+                    if video:
+                        _write_video(log, Path(job.out_dir) / "videos" / f"{name}.mp4", d.rate_hz)
+                    logs.setdefault(name, []).append(log)
+                    out.append((argument, log))
+            if first:
+                plot_world(world, course, logs, Path(job.out_dir) / "trajectories" / argument / f"{job.world.name}.png")
     return out
 
 

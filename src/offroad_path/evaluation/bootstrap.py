@@ -1,16 +1,23 @@
-"""Confidence intervals by block bootstrap: the test set resampled by whole blocks of driving.
+"""Confidence intervals by a hierarchical bootstrap: test worlds, then blocks of driving within them,
+then training seeds, each drawn with replacement.
 
-Frames of one stretch of road are not independent samples (neighbouring frames see the same
-ground), so the unit resampled is the block (20 m of test driving, the split's `block_m`), drawn
-with replacement as many times as there are blocks; a score is recomputed from the counts summed
-over each resample, and the interval is the percentile interval of those scores (Efron & Tibshirani
-1993, ch. 13; Kuensch 1989 for blocks). A comparison of two methods on the same test frames is
-**paired**: both are scored on the same resamples and the interval is that of the difference, so
-what the two share (the same hard frames) cancels.
+What varies between two runs of this pipeline is which worlds were rendered for testing (each with
+its own sun, palette and vegetation), which stretches of driving in them were tested, and which
+seed trained a network. Blocks of one world are not independent samples (they share its look, and a
+20 m label reaches into the next block), so resampling blocks alone counts the worlds' variation
+too little; and a seed's network is one draw of the training's randomness. So a resample draws as
+many worlds as the test set has, with replacement; within each drawn world as many of its blocks as
+it has, with replacement; and as many training seeds as there are, with replacement (Davison &
+Hinkley 1997, section 3.8, for the two-stage draw; Kuensch 1989 for blocks). A score is recomputed
+from the counts summed over the drawn blocks and seeds, and the interval is the percentile interval
+of those scores (Efron & Tibshirani 1993, ch. 13). A comparison of two methods is **paired**: both
+are scored on the same draw of worlds, blocks and seed indices, and the interval is that of the
+difference, so what the two share (the same hard worlds and frames) cancels. A method without seeds
+(a prior, a baseline) is scored on the same worlds and blocks.
 
 Every score here is a ratio of sums of per-item statistics (pooled IoU: tp / (tp + fp + fn); a
-mean error: sum of errors / count), so a block is summarised by its sums and a resample by the sum
-of its blocks': `block_sums` once, then any number of resamples at little cost.
+mean error: sum of errors / count), so a block is summarised by its sums per seed and a resample
+by a weighted sum of them: `block_sums` once, the draw's weights once, then any score at little cost.
 """
 
 from __future__ import annotations
@@ -54,17 +61,24 @@ class Interval:
 
 
 def block_sums(per_item: np.ndarray, blocks: Sequence[Hashable]) -> np.ndarray:
-    """Per-item statistics (N, k) summed per block (B, k), blocks in order of first appearance."""
+    """Per-item statistics (N, k), or per seed (S, N, k), summed per block: (B, k) or (S, B, k),
+    blocks in order of first appearance."""
     per_item = np.asarray(per_item, np.float64)
     if per_item.ndim == 1:
         per_item = per_item[:, None]
-    if len(blocks) != len(per_item):
-        raise ValueError(f"{len(per_item)} items but {len(blocks)} block labels")
+    if len(blocks) != per_item.shape[-2]:
+        raise ValueError(f"{per_item.shape[-2]} items but {len(blocks)} block labels")
     order = {b: i for i, b in enumerate(dict.fromkeys(blocks))}
     index = np.fromiter((order[b] for b in blocks), np.intp, len(blocks))
-    sums = np.zeros((len(order), per_item.shape[1]))
-    np.add.at(sums, index, per_item)
+    sums = np.zeros((*per_item.shape[:-2], len(order), per_item.shape[-1]))
+    np.add.at(sums, (..., index, slice(None)), per_item)
     return sums
+
+
+def worlds_of(blocks: Sequence[Hashable]) -> list[Hashable]:
+    """The world of each distinct block (in block_sums' order): a block label (sequence, index)'s
+    sequence, since every test world is one rendered sequence; any other label is its own world."""
+    return [b[0] if isinstance(b, tuple) else b for b in dict.fromkeys(blocks)]
 
 
 @dataclass(frozen=True)
@@ -76,31 +90,103 @@ class Resampling:
     level: float = LEVEL
 
     def indices(self, n_blocks: int) -> np.ndarray:
-        """(count, n_blocks) block indices drawn with replacement: one resample per row."""
+        """(count, n_blocks) block indices drawn with replacement, one resample per row: a flat draw
+        of independent units (the drive's drives within a world, tests)."""
         if n_blocks < 2:
             raise ValueError(f"a block bootstrap needs at least 2 blocks, has {n_blocks}")
         return np.random.default_rng(self.seed).integers(0, n_blocks, (self.count, n_blocks))
 
-    def percentiles(self, values: np.ndarray) -> tuple[float, float]:
+    def weights(self, worlds: Sequence[Hashable], seeds: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """The hierarchical draw: (count, B) how often each block is drawn (worlds, then blocks within
+        each drawn world) and (count, S) how often each seed is; `worlds`: each block's world."""
+        if len(worlds) < 2:
+            raise ValueError(f"a block bootstrap needs at least 2 blocks, has {len(worlds)}")
+        rng = np.random.default_rng(self.seed)
+        names = list(dict.fromkeys(worlds))
+        members = [np.flatnonzero([w == name for w in worlds]) for name in names]
+        times = np.zeros((self.count, len(names)), np.intp)  # how often each world is drawn
+        np.add.at(times, (np.arange(self.count)[:, None], rng.integers(0, len(names), (self.count, len(names)))), 1)
+        blocks = np.zeros((self.count, len(worlds)))
+        for w, own in enumerate(members):
+            draws = times[:, w] * len(own)  # each drawn copy of the world draws as many blocks as it has
+            rows = np.repeat(np.arange(self.count), draws)
+            np.add.at(blocks, (rows, own[rng.integers(0, len(own), draws.sum())]), 1.0)
+        seed_weights = np.zeros((self.count, seeds))
+        np.add.at(seed_weights, (np.arange(self.count)[:, None], rng.integers(0, seeds, (self.count, seeds))), 1.0)
+        return blocks, seed_weights
+
+    def percentiles(self, values: np.ndarray, level: float | None = None) -> tuple[float, float]:
         values = values[np.isfinite(values)]
         if not len(values):
             return float("nan"), float("nan")
-        tail = (1.0 - self.level) / 2.0
+        tail = (1.0 - (self.level if level is None else level)) / 2.0
         low, high = np.quantile(values, [tail, 1.0 - tail])
         return float(low), float(high)
 
 
-def interval(sums: np.ndarray, score: Score, resampling: Resampling = Resampling()) -> Interval:
-    """The percentile interval of `score` over block resamples of `sums` (B, k)."""
-    drawn = sums[resampling.indices(len(sums))].sum(axis=1)  # (count, k)
-    return Interval(float(score(sums.sum(axis=0))), *resampling.percentiles(score(drawn)))
+def drawn(sums: np.ndarray, blocks: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(count, k) statistics of each resample: block sums (B, k) or per seed (S, B, k) weighted by
+    the draw's block weights (count, B) and, with seeds, seed weights (count, S)."""
+    if sums.ndim == 2:
+        return blocks @ sums
+    return np.einsum("rs,rb,sbk->rk", seeds, blocks, sums)
 
 
-def paired_interval(a: np.ndarray, b: np.ndarray, score: Score, resampling: Resampling = Resampling()) -> Interval:
-    """The interval of score(a) - score(b) over the same block resamples of both: `a` and `b` are
-    two methods' block sums (B, k) on the same blocks, in the same order."""
-    if a.shape != b.shape:
+def whole(sums: np.ndarray) -> np.ndarray:
+    """(k,) statistics of the whole test set: over blocks and seeds."""
+    return sums.reshape(-1, sums.shape[-1]).sum(axis=0)
+
+
+@dataclass(frozen=True)
+class Draws:
+    """A score's (or a paired difference's) estimate on the whole test set and its value on every
+    resample: intervals at any level and a two-sided bootstrap p-value (for Holm's correction)."""
+
+    estimate: float
+    values: np.ndarray  # (count,)
+    resampling: Resampling
+
+    def interval(self, level: float | None = None) -> Interval:
+        return Interval(self.estimate, *self.resampling.percentiles(self.values, level))
+
+    def p_value(self) -> float:
+        """Twice the smaller share of resamples on either side of 0 (at most 1): the smallest
+        1 - level at which the percentile interval excludes 0."""
+        values = self.values[np.isfinite(self.values)]
+        if not len(values):
+            return float("nan")
+        return float(min(1.0, 2.0 * min(np.mean(values <= 0.0), np.mean(values >= 0.0))))
+
+
+def score_draws(sums: np.ndarray, score: Score, resampling: Resampling, worlds: Sequence[Hashable] | None = None) -> Draws:
+    """`score` over hierarchical resamples of `sums` ((B, k) or (S, B, k)); worlds: each block's
+    (None: every block its own world, a flat block bootstrap)."""
+    seeds = sums.shape[0] if sums.ndim == 3 else 1
+    blocks, seed_weights = resampling.weights(list(range(sums.shape[-2])) if worlds is None else worlds, seeds)
+    return Draws(float(score(whole(sums))), score(drawn(sums, blocks, seed_weights)), resampling)
+
+
+def paired_draws(a: np.ndarray, b: np.ndarray, score: Score, resampling: Resampling, worlds: Sequence[Hashable] | None = None) -> Draws:
+    """score(a) - score(b) on the same resamples: `a` and `b` are two methods' block sums on the same
+    blocks in the same order, (B, k) or per seed (S, B, k); seed index s of both is drawn together."""
+    if a.shape[-2:] != b.shape[-2:]:
         raise ValueError(f"paired block sums must have one shape, have {a.shape} and {b.shape}")
-    index = resampling.indices(len(a))
-    difference = score(a[index].sum(axis=1)) - score(b[index].sum(axis=1))
-    return Interval(float(score(a.sum(axis=0)) - score(b.sum(axis=0))), *resampling.percentiles(difference))
+    seeds = max(a.shape[0] if a.ndim == 3 else 1, b.shape[0] if b.ndim == 3 else 1)
+    for side in (a, b):
+        if side.ndim == 3 and side.shape[0] != seeds:
+            raise ValueError(f"paired runs must have one number of seeds, have {a.shape[0]} and {b.shape[0]}")
+    blocks, seed_weights = resampling.weights(list(range(a.shape[-2])) if worlds is None else worlds, seeds)
+    difference = score(drawn(a, blocks, seed_weights)) - score(drawn(b, blocks, seed_weights))
+    return Draws(float(score(whole(a)) - score(whole(b))), difference, resampling)
+
+
+def interval(sums: np.ndarray, score: Score, resampling: Resampling = Resampling(), worlds: Sequence[Hashable] | None = None) -> Interval:
+    """The percentile interval of `score` over resamples of `sums` (score_draws)."""
+    return score_draws(sums, score, resampling, worlds).interval()
+
+
+def paired_interval(
+    a: np.ndarray, b: np.ndarray, score: Score, resampling: Resampling = Resampling(), worlds: Sequence[Hashable] | None = None
+) -> Interval:
+    """The interval of score(a) - score(b) over the same resamples of both (paired_draws)."""
+    return paired_draws(a, b, score, resampling, worlds).interval()

@@ -20,7 +20,7 @@ from offroad_path.evaluation.tables import fmt
 from offroad_path.world.groups import GROUPS
 
 if TYPE_CHECKING:
-    from offroad_path.evaluation.uncertainty import BlockBootstrap
+    from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
 
 
 def parse_row(row: dict[str, str]) -> dict:
@@ -101,12 +101,19 @@ class ConditionTable:
 
 
 def by_condition(
-    conditions: list[dict], per_image: dict[str, np.ndarray], bootstrap: BlockBootstrap | None = None, sequences: list[str] | None = None
+    conditions: list[dict],
+    per_image: dict[str, np.ndarray],
+    bootstrap: HierarchicalBootstrap | None = None,
+    sequences: list[str] | None = None,
 ) -> ConditionTable:
-    """per_image: method -> its (N, 4) per-image counts [tp, fp, tn, fn] over the same samples;
-    bootstrap: intervals over each group's blocks; sequences: each sample's, to count them per group."""
+    """per_image: method -> its (N, 4) per-image counts [tp, fp, tn, fn] over the same samples, or per
+    training seed (S, N, 4); bootstrap: intervals over each group's worlds, blocks and seeds;
+    sequences: each sample's, to count them per group."""
     masks = [np.array([test(row) for row in conditions], bool) for _, _, test in GROUPS]
-    iou = {m: [pooled(counts[mask]).iou if mask.any() else float("nan") for mask in masks] for m, counts in per_image.items()}
+    iou = {
+        m: [pooled(counts[..., mask, :].reshape(-1, 4)).iou if mask.any() else float("nan") for mask in masks]
+        for m, counts in per_image.items()
+    }
     table = ConditionTable([k for k, _, _ in GROUPS], [t for _, t, _ in GROUPS], [int(m.sum()) for m in masks], iou)
     if sequences is not None:
         table.sequences = [len({s for s, keep in zip(sequences, mask, strict=True) if keep}) for mask in masks]

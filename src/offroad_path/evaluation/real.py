@@ -1,20 +1,29 @@
 """Real-footage rows: every trained network scored on a labelled real recording (the label
-stage's VO labels of e.g. the KITTI snippet), beside two numbers that need no perception: the
-same predictions against the labels of the recording's other frames (the non-corresponding
-baseline) and the mean path of the synthetic training labels. A network that perceives the
-path beats both; one that paints its prior scores the same against any frame's label.
+stage's labels of e.g. the KITTI snippet, from the poses its summary.json names: the VO's or a
+file's), beside two numbers that need no perception: the same predictions against the labels of
+the recording's other frames (the non-corresponding baseline) and the mean path of the synthetic
+training labels. A network that perceives the path beats both; one that paints its prior scores the
+same against any frame's label.
+
+Perception is measured label by label (the label-centred gain): for each labelled frame, the IoU of
+its own prediction against its label minus the mean IoU of the predictions of the frames that bend
+the other way (left, straight, right from the labels' poses) against the same label. A constant
+prediction scores exactly 0, whatever it paints; a network that follows the path scores above 0.
+The row's estimate is the mean gain over the frames that have such frames, and its interval is the
+block bootstrap of that same mean (one estimand, its interval around it).
 
 Whether a recording can show perception at all: when its labels all look alike (a straight road),
 even a perfect predictor gains little over the other frames' labels. The label diversity (mean IoU
 between the labels of different frames) bounds that gain at 1 - diversity. How precisely the
 recording measures an IoU: the widest 95 % block-bootstrap interval of an IoU in its table (the
 networks' and the mean-path prior's). When the largest gain is below that width, the recording
-cannot separate perception from a prior, and the report says so. The shuffled control scores each
-prediction also against the labels of frames that bend the other way (left, straight, right from
-the labels' poses), which a painted prior cannot match."""
+cannot separate perception from a prior, and the report says so. A recording is one world: its
+intervals resample its blocks of driving alone, and with few blocks they understate what another
+recording would show (the report says how many)."""
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,10 +50,9 @@ class RealRow:
     iou_low: float = field(metadata={"title": "IoU, 95 % low"})
     iou_high: float = field(metadata={"title": "IoU, 95 % high"})
     non_corresponding_iou: float = field(metadata={"title": "IoU against other frames' labels"})
-    other_direction_iou: float = field(metadata={"title": "against labels bending another way"})
-    perception: float = field(metadata={"title": "difference (perception)"})
-    perception_low: float = field(default=float("nan"), metadata={"title": "per-frame gain, 95 % low"})
-    perception_high: float = field(default=float("nan"), metadata={"title": "per-frame gain, 95 % high"})
+    gain: float = field(metadata={"title": "label-centred gain over frames bending the other way"})
+    gain_low: float = field(default=float("nan"), metadata={"title": "gain, 95 % low"})
+    gain_high: float = field(default=float("nan"), metadata={"title": "gain, 95 % high"})
 
 
 @dataclass
@@ -52,6 +60,7 @@ class RealFrames:
     """The labelled frames of a label run: RGB images and their path labels (N, H, W) bool."""
 
     name: str  # the label run's folder name, for the report
+    poses: str  # where its labels' poses came from (summary.json's poses_source of each sequence)
     images: list[np.ndarray]
     labels: np.ndarray
     groups: list[tuple[str, int]]  # (sequence, f0) of each frame
@@ -75,7 +84,12 @@ class RealFrames:
                 direction.append(bend_direction(run.poses[f0], run.poses[ahead]))
         if len(labels) < 2:
             raise ValueError(f"{labels_dir}: holds {len(labels)} labelled frame(s); real-footage rows need at least 2")
-        return cls(labels_dir.name, images, np.stack(labels), groups, blocks, direction)
+        summary = json.loads((labels_dir / "summary.json").read_text())
+        sources = sorted({entry.get("poses_source", "vo") for entry in summary["sequences"]})
+        poses = ", ".join(
+            {"vo": "the label stage's visual odometry", "file": "a pose file (label.poses.source=file)"}.get(x, x) for x in sources
+        )
+        return cls(labels_dir.name, poses, images, np.stack(labels), groups, blocks, direction)
 
 
 STRAIGHT_DEG = 5.0  # a heading change smaller than this over the label's drive: straight
@@ -124,24 +138,36 @@ class Separability:
         return head + " **This recording cannot separate perception from a prior**: no result below says whether a network perceives."
 
 
+def label_centred_gain(matrix: np.ndarray, frames: RealFrames) -> np.ndarray:
+    """Per labelled frame j: IoU(prediction j, label j) minus the mean IoU of the predictions of the
+    frames bending the other way against label j (matrix: (N, N) prediction i against label j); nan
+    for a frame with no such frame."""
+    direction = np.array(frames.direction)
+    turned = _different(frames.groups) & (direction[:, None] != direction[None, :])  # (i, j): i bends another way than j
+    against = np.where(turned, matrix, np.nan)
+    with np.errstate(invalid="ignore"):
+        others = np.nanmean(against, axis=0) if turned.any() else np.full(len(matrix), np.nan)
+    return np.where(turned.any(axis=0), np.diag(matrix) - others, np.nan)
+
+
 def real_row(method: str, predicted: np.ndarray, frames: RealFrames, resampling: Resampling | None = None) -> RealRow:
-    """predicted: (N, H, W) bool paths on the frames. The per-frame gain (own IoU minus the mean
-    over other frames' labels) gets a block-bootstrap interval with `resampling`."""
+    """predicted: (N, H, W) bool paths on the frames. The pooled IoU and the mean label-centred gain
+    each get a block-bootstrap interval with `resampling`."""
     own = pooled(counts(predicted.astype(np.float32), frames.labels)).iou
     other = non_corresponding(predicted, frames.labels, frames.groups).iou
-    matrix = iou_matrix(predicted, frames.labels)
-    others = _different(frames.groups)
-    direction = np.array(frames.direction)
-    turned = others & (direction[:, None] != direction[None, :])
-    other_direction = float(matrix[turned].mean()) if turned.any() else float("nan")
+    gain = label_centred_gain(iou_matrix(predicted, frames.labels), frames)
+    kept = np.isfinite(gain)
     bounds = [float("nan")] * 4
+    blocks = frames.blocks if len(set(frames.blocks)) >= 2 else frames.groups
     if resampling is not None:
-        gain = np.diag(matrix) - np.nanmean(np.where(others, matrix, np.nan), axis=1)
-        blocks = frames.blocks if len(set(frames.blocks)) >= 2 else frames.groups
         found = interval(block_sums(counts(predicted.astype(np.float32), frames.labels), blocks), iou, resampling)
-        gained = interval(block_sums(np.stack([gain, np.ones_like(gain)], 1), blocks), mean, resampling)
-        bounds = [found.low, found.high, gained.low, gained.high]
-    return RealRow(method, own, *bounds[:2], other, other_direction, own - other, *bounds[2:])
+        bounds[:2] = [found.low, found.high]
+        kept_blocks = [b for b, k in zip(blocks, kept, strict=True) if k]
+        if len(set(kept_blocks)) >= 2:
+            gained = interval(block_sums(np.stack([gain[kept], np.ones(kept.sum())], 1), kept_blocks), mean, resampling)
+            bounds[2:] = [gained.low, gained.high]
+    mean_gain = float(gain[kept].mean()) if kept.any() else float("nan")
+    return RealRow(method, own, *bounds[:2], other, mean_gain, *bounds[2:])
 
 
 def _different(groups: list) -> np.ndarray:

@@ -40,6 +40,7 @@ class TestSet:
     counts: dict[tuple[str, str], np.ndarray]  # (run, post-processing) -> (N, 4) per-image [tp, fp, tn, fn], summed over seeds
     seed_counts: dict[tuple[str, str], list[np.ndarray]]  # the same per seed
     predicted: dict[str, np.ndarray]  # run -> (N, H, W) bool: its first seed's raw map above the threshold
+    seed_predicted: dict[str, list[np.ndarray]]  # run -> the same for every seed, the first one first
     curves: dict[str, dict[str, np.ndarray]]  # run -> precision-recall curve of its first seed's raw maps
     prior: np.ndarray  # (H, W) bool: the mean training label above the threshold
     threshold: float  # path where confidence > threshold (evaluate.threshold)
@@ -51,6 +52,7 @@ class TestSet:
         samples: list[Sample] = []
         labels = np.zeros(0)
         paths, per_seed, predicted, curves = {}, {}, {}, {}
+        seed_predicted: dict[str, list[np.ndarray]] = {}
         for run in e.runs:
             for seed in e.seeds:
                 folder = f"{run}/seed{seed}"
@@ -71,14 +73,18 @@ class TestSet:
                         labels = load_labels(samples)
                     maps = load_maps([p for _, p in rows])
                     per_seed.setdefault((run, pp), []).append(counts(maps, labels, e.threshold))
+                    if pp == "no":
+                        seed_predicted.setdefault(run, []).append(maps > e.threshold)
                     if seed == e.seeds[0]:
                         paths[run, pp] = [p for _, p in rows]
                         if pp == "no":
-                            predicted[run] = maps > e.threshold
+                            predicted[run] = seed_predicted[run][0]
                             curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
         prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
         summed = {key: np.sum(seeds, axis=0) for key, seeds in per_seed.items()}
-        return cls(list(e.runs), list(e.seeds), samples, labels, paths, summed, per_seed, predicted, curves, prior, e.threshold)
+        return cls(
+            list(e.runs), list(e.seeds), samples, labels, paths, summed, per_seed, predicted, seed_predicted, curves, prior, e.threshold
+        )
 
     def checkpoint(self, runs_dir: str | Path, run: str) -> Path:
         """The network of `run` that sections run on frames of their own (its first seed's)."""

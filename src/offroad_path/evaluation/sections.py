@@ -12,16 +12,17 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.data.loading import load_maps
-from offroad_path.evaluation.bootstrap import Interval, mean
+from offroad_path.evaluation.bootstrap import Draws, Interval, mean
 from offroad_path.evaluation.conditions import ConditionTable, by_condition, read_conditions
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases
 from offroad_path.evaluation.metrics import Scores, non_corresponding, per_image_iou, pooled
+from offroad_path.evaluation.primaries import from_draws, owned
 from offroad_path.evaluation.real import RealFrames, RealRow, Separability, score_real, separability
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, markdown_table, method_title, network_name, split_run_name
 from offroad_path.evaluation.temporal import TemporalRow, score_temporal
-from offroad_path.evaluation.uncertainty import BlockBootstrap
+from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, Uncertainty
 
 log = logging.getLogger(__name__)
 
@@ -134,22 +135,23 @@ class SteeringFromPaths:
     """A steering angle from each run's thresholded path (pure pursuit), against PilotNet's and the
     label's (empty without steering ground truth)."""
 
-    def __init__(self, e: DictConfig, bootstrap: BlockBootstrap) -> None:
+    def __init__(self, e: DictConfig, bootstrap: HierarchicalBootstrap) -> None:
         self.e, self.bootstrap = e, bootstrap
         self.comparison = SteeringComparison(e)
         self.against_pilotnet: dict[str, Interval] = {}  # run -> paired MAE difference, path + pursuit - PilotNet
+        self.draws: dict[str, Draws] = {}  # f"{run}_vs_pilotnet" -> its resamples (for the primaries)
 
     def score(self, test: TestSet) -> None:
-        self.comparison.start(test.samples, test.labels)
+        self.comparison.start(test.samples, test.labels, test.seeds)
         for run in test.runs:
-            self.comparison.add(run, f"{method_title(run)} + pure pursuit", test.predicted[run])
-        errors = self.comparison.errors
+            self.comparison.add(run, f"{method_title(run)} + pure pursuit", test.seed_predicted[run])
+        errors = self.comparison.errors  # (S, N) each
         if "pilotnet" in errors:
-            ones = np.ones(len(test.samples))
             for run in test.runs:
-                a, b = np.stack([errors[run], ones], 1), np.stack([errors["pilotnet"], ones], 1)
-                if (difference := self.bootstrap.paired(a, b, mean)) is not None:
-                    self.against_pilotnet[run] = difference
+                a, b = (np.stack([errors[k], np.ones_like(errors[k])], axis=-1) for k in (run, "pilotnet"))
+                if (draws := self.bootstrap.paired_draws(a, b, mean)) is not None:
+                    self.draws[f"{run}_vs_pilotnet"] = draws
+                    self.against_pilotnet[run] = draws.interval()
 
     def markdown(self) -> str:
         if not self.comparison.rows:
@@ -168,8 +170,9 @@ class SteeringFromPaths:
         if not self.against_pilotnet:
             return ""
         lines = [
-            "\nPaired block-bootstrap intervals (the uncertainty section's resamples) of each path network's error minus "
-            "PilotNet's, on the same frames; below 0: the path network steers closer to the true angle.\n",
+            "\nPaired hierarchical-bootstrap intervals (worlds, blocks, training seeds; seed k of a network paired with seed k "
+            "of PilotNet) of each path network's error minus PilotNet's, on the same frames, both pooled over their seeds; below "
+            "0: the path network steers closer to the true angle.\n",
             "| method | MAE difference, path + pure pursuit - PilotNet [95 % interval] |",
             "| --- | --- |",
         ]
@@ -189,7 +192,7 @@ class SteeringFromPaths:
 class ByCondition:
     """Pooled IoU of the raw maps per condition of the next 20 m of driving (rendered worlds only)."""
 
-    def __init__(self, bootstrap: BlockBootstrap) -> None:
+    def __init__(self, bootstrap: HierarchicalBootstrap) -> None:
         self.bootstrap = bootstrap
         self.table: ConditionTable | None = None
         self.keys: dict[str, str] = {}  # method title -> its metrics key
@@ -197,7 +200,7 @@ class ByCondition:
     def score(self, test: TestSet) -> None:
         if (conditions := read_conditions(test.samples)) is None:
             return
-        per_image = {method_title(run): test.counts[run, "no"] for run in test.runs} | {"mean path prior": test.prior_counts}
+        per_image = {method_title(run): np.stack(test.seed_counts[run, "no"]) for run in test.runs} | {"mean path prior": test.prior_counts}
         self.keys = {method_title(run): run for run in test.runs} | {"mean path prior": "mean_path_prior"}
         self.table = by_condition(conditions, per_image, self.bootstrap, [s.sequence for s in test.samples])
 
@@ -207,9 +210,10 @@ class ByCondition:
         return (
             "\n## Results by condition\n\nPooled IoU (raw maps) over the test frames of each group, from what the world knows "
             "about the next 20 m of driving (conditions.csv of each sequence); a frame can be in several groups. "
-            "The mean path prior shows how hard a group is for a network that ignores the image. Each figure with its 95 % "
-            "block-bootstrap interval over the blocks that hold the group's frames, and the number of test sequences they come "
-            "from; a group within one or two sequences says little.\n\n" + self.table.markdown()
+            "The mean path prior shows how hard a group is for a network that ignores the image. Each network's figure pools its "
+            "training seeds, with its 95 % hierarchical-bootstrap interval (the test worlds that hold the group's frames, their "
+            "blocks, the seeds), and the number of test sequences they come from; a group within one or two sequences says little. "
+            "Exploratory: 40 cells, no correction for multiplicity.\n\n" + self.table.markdown()
         )
 
     def metrics(self) -> dict:
@@ -245,26 +249,32 @@ class Temporal:
 class RealFootage:
     """Every run on a labelled real recording (evaluate.real_labels_dir; none by default)."""
 
-    def __init__(self, e: DictConfig, bootstrap: BlockBootstrap, block_m: float, distance_m: float) -> None:
+    def __init__(self, e: DictConfig, bootstrap: HierarchicalBootstrap, block_m: float, distance_m: float) -> None:
         self.e, self.resampling, self.block_m, self.distance_m = e, bootstrap.resampling, block_m, distance_m
         self.rows: dict[str, RealRow] | None = None
+        self.frames: RealFrames | None = None
         self.separability: Separability | None = None
 
     def score(self, test: TestSet) -> None:
         if self.e.real_labels_dir:
-            frames = RealFrames.read(Path(self.e.real_labels_dir), self.block_m, self.distance_m)
-            self.rows = score_real(networks(self.e, test), frames, test.prior, self.e.threshold, self.resampling)
-            self.separability = separability(frames, self.rows)
+            self.frames = RealFrames.read(Path(self.e.real_labels_dir), self.block_m, self.distance_m)
+            self.rows = score_real(networks(self.e, test), self.frames, test.prior, self.e.threshold, self.resampling)
+            self.separability = separability(self.frames, self.rows)
+
+    def _poses(self) -> str:
+        return self.frames.poses if self.frames is not None else "its poses"
 
     def markdown(self) -> str:
         if self.rows is None:
             return ""
         return (
-            f"\n## Real footage ({Path(self.e.real_labels_dir).name})\n\nEach network, trained on the synthetic world, run on the "
-            "labelled frames of a real recording (VO labels) and scored against each frame's own label and, averaged over pairs, "
-            "against the other frames' labels. A network that perceives the path scores higher on its own frame; one that paints a "
-            "fixed prior scores about the same on both, like the mean path of the synthetic training labels; against the labels "
-            "of frames that bend another way (the shuffled control) it cannot do better than against its own.\n\n"
+            f"\n## Real footage ({Path(self.e.real_labels_dir).name})\n\nEach network (its first training seed), trained on the "
+            f"synthetic world, run on the labelled frames of a real recording (labels made by the label stage from {self._poses()}) "
+            "and scored against each frame's own label and, averaged over pairs, against the other frames' labels. The label-centred "
+            "gain: for each labelled frame, the IoU of its own prediction against its label minus the mean IoU of the predictions "
+            "of the frames that bend the other way against the same label, averaged over frames; a constant prediction (the mean "
+            "path prior among them) scores exactly 0, a network that follows the path above 0. Intervals: 95 % block bootstrap over "
+            f"the recording's {len(set(self.frames.blocks))} blocks of driving, one world: few blocks understate the uncertainty.\n\n"
             + self.separability.sentence()
             + "\n\n"
             + markdown_table(list(self.rows.values()))
@@ -281,3 +291,45 @@ class RealFootage:
             "separable": s.separable,
         }
         return {"real_footage": {"recording": recording} | {key: numbers(row) for key, row in self.rows.items()}}
+
+
+class PrimaryQuestions:
+    """The primaries evaluate answers (evaluate.conclusions: uncertainty/<key> and
+    steering_from_paths/<key>), each with its hierarchical-bootstrap p-value and its interval at every
+    Holm level; the family's verdicts, with the drive's primaries, are the README's (evaluation.primaries)."""
+
+    SECTIONS = ("uncertainty", "steering_from_paths")
+
+    def __init__(self, e: DictConfig, uncertainty: Uncertainty, steering: SteeringFromPaths) -> None:
+        self.conclusions = e.conclusions
+        self.mine = owned(self.conclusions.primaries, self.SECTIONS)
+        self.sources = {"uncertainty": uncertainty.draws, "steering_from_paths": steering.draws}
+        self.found: dict[str, dict] = {}
+
+    def score(self, test: TestSet) -> None:
+        family = len(self.conclusions.primaries)
+        for name, (section, key) in self.mine.items():
+            if (draws := self.sources[section].get(key)) is not None:
+                self.found[name] = from_draws(draws, self.conclusions.alpha, family)
+
+    def markdown(self) -> str:
+        if not self.mine:
+            return ""
+        q = self.conclusions
+        lines = [
+            "\n## Primary questions\n",
+            f"Declared in evaluate.conclusions before the run: {len(q.primaries)} primaries in one family (these and the drive's), "
+            f"tested with Holm's correction at family-wise {q.alpha:g}; the README states each verdict. Here each of this stage's: "
+            "the estimate with its 95 % hierarchical-bootstrap interval and the bootstrap's two-sided p-value (uncorrected).\n",
+            "| primary | claim | comparison | estimate [95 % interval] | p (uncorrected) |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        for name, (section, key) in self.mine.items():
+            entry = self.found.get(name)
+            shown = Interval(entry["estimate"], *entry["intervals"][0]).difference_text() if entry else "not measured"
+            p = f"{entry['p_value']:.4f}" if entry else ""
+            lines.append(f"| {name} | {q.primaries[name].claim} | {section}/{key} | {shown} | {p} |")
+        return "\n".join(lines) + "\n"
+
+    def metrics(self) -> dict:
+        return {"primaries": self.found} if self.found else {}

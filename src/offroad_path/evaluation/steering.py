@@ -35,7 +35,7 @@ class FrameGeometry:
 class SteeringRow:
     method: str
     frames: int
-    no_path: int = field(metadata={"title": "frames without a path (steered straight)"})
+    no_path: int = field(metadata={"title": "frames without a path (steered straight), over all seeds"})
     mae: float = field(metadata={"title": "MAE (normalised)"})
     mae_road_wheel_deg: float = field(metadata={"title": "MAE, road wheels (deg)"})
     mae_steering_wheel_deg: float = field(metadata={"title": "MAE, steering wheel (deg)"})
@@ -91,9 +91,10 @@ def pilotnet_predictions(path: Path, samples: list[Sample]) -> np.ndarray | None
 
 
 def steering_row(method: str, predicted: np.ndarray, geometry: list[FrameGeometry], no_path: int, steering_ratio: float) -> SteeringRow:
+    """predicted: (N,) or per training seed (S, N); the errors pool the seeds."""
     true = np.array([g.true for g in geometry])
     lock = np.array([g.lock_deg for g in geometry])
-    error = np.abs(predicted - true)
+    error = np.abs(predicted - true)  # (N,) or (S, N)
     road = float((error * lock).mean())
     return SteeringRow(method, len(true), no_path, float(error.mean()), road, road * steering_ratio)
 
@@ -101,31 +102,33 @@ def steering_row(method: str, predicted: np.ndarray, geometry: list[FrameGeometr
 @dataclass
 class SteeringComparison:
     """The table's rows by metric key, gathered while the runs are scored (their maps are loaded
-    once, there): straight_ahead, pilotnet, one per run, label_ceiling."""
+    once, there): straight_ahead, pilotnet, one per run, label_ceiling. A run's and PilotNet's rows
+    pool their training seeds; `errors` keeps them apart, (S, N), for the hierarchical bootstrap."""
 
     e: DictConfig  # evaluate's config
     geometry: list[FrameGeometry] | None = None
     rows: dict[str, SteeringRow] = field(default_factory=dict)
-    errors: dict[str, np.ndarray] = field(default_factory=dict)  # key -> per-frame absolute error (normalised)
+    errors: dict[str, np.ndarray] = field(default_factory=dict)  # key -> (S, N) absolute error (normalised), S = 1 without seeds
 
-    def start(self, samples: list[Sample], labels: np.ndarray) -> None:
+    def start(self, samples: list[Sample], labels: np.ndarray, seeds: list[int]) -> None:
         self.geometry = frame_geometry(samples, Path(self.e.labels_dir))
         if self.geometry is None:
             return
-        self._row("straight_ahead", "always straight ahead", np.zeros(len(samples)))
-        predictions = self.e.steering_from_paths.pilotnet_predictions  # null: no PilotNet row
-        pilotnet = pilotnet_predictions(Path(predictions), samples) if predictions else None
-        if pilotnet is not None:
-            self._row("pilotnet", "PilotNet (end to end)", pilotnet)
-        self._pursued("label_ceiling", "ground-truth path label + pure pursuit (the ceiling)", labels)
+        self._row("straight_ahead", "always straight ahead", np.zeros((1, len(samples))))
+        predictions = self.e.steering_from_paths.pilotnet_predictions  # null: no PilotNet row; {seed}: each seed's file
+        found = [pilotnet_predictions(Path(predictions.replace("{seed}", str(seed))), samples) for seed in seeds] if predictions else [None]
+        if all(p is not None for p in found):
+            self._row("pilotnet", "PilotNet (end to end)", np.stack(found))
+        self._pursued("label_ceiling", "ground-truth path label + pure pursuit (the ceiling)", [labels])
 
-    def add(self, key: str, method: str, paths: np.ndarray) -> None:
+    def add(self, key: str, method: str, paths: list[np.ndarray]) -> None:
+        """paths: (N, H, W) binary paths of each training seed."""
         if self.geometry is not None:
             self._pursued(key, method, paths)
 
-    def _pursued(self, key: str, method: str, paths: np.ndarray) -> None:
-        angles, no_path = pursued(paths, self.geometry, self.e.steering_from_paths.lookahead_m)
-        self._row(key, method, angles, no_path)
+    def _pursued(self, key: str, method: str, paths: list[np.ndarray]) -> None:
+        found = [pursued(p, self.geometry, self.e.steering_from_paths.lookahead_m) for p in paths]
+        self._row(key, method, np.stack([angles for angles, _ in found]), sum(missing for _, missing in found))
 
     def _row(self, key: str, method: str, predicted: np.ndarray, no_path: int = 0) -> None:
         self.rows[key] = steering_row(method, predicted, self.geometry, no_path, self.e.steering_from_paths.steering_ratio)

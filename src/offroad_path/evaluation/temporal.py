@@ -153,6 +153,7 @@ def score_temporal(
         load_block(block, label)
     labels = np.concatenate([b.labels for b in blocks])
     frame_blocks = [i for i, b in enumerate(blocks) for _ in b.frames]
+    worlds = [b.run.name for b in blocks]  # each block's test world, for the hierarchical draw
     resampling = Resampling(e.bootstrap.resamples, e.bootstrap.seed, e.bootstrap.level)
     rows = {}
     for run, checkpoint in checkpoints.items():
@@ -167,7 +168,7 @@ def score_temporal(
             steady_fused += stability(smooth > e.threshold, block)
         raw_counts, fused_counts = counts(np.concatenate(raw), labels, e.threshold), counts(np.concatenate(fused), labels, e.threshold)
         gain = (
-            paired_interval(block_sums(fused_counts, frame_blocks), block_sums(raw_counts, frame_blocks), iou, resampling)
+            paired_interval(block_sums(fused_counts, frame_blocks), block_sums(raw_counts, frame_blocks), iou, resampling, worlds)
             if len(blocks) >= 2
             else None
         )

@@ -1,8 +1,9 @@
 """The report's uncertainty section: a 95 % interval on every run's pooled IoU and a paired
 interval on every comparison the results table invites (network against network without
-pretraining, segmentation pretraining against none, post-processing against none), by resampling
-the test set's blocks of driving (evaluation.bootstrap). A difference whose interval holds 0 is
-stated as "no difference measured"."""
+pretraining, segmentation pretraining against none, post-processing against none), by the
+hierarchical bootstrap of evaluation.bootstrap (test worlds, their blocks of driving, training
+seeds). A difference whose interval holds 0 is stated as "no difference measured"; the comparisons
+evaluate.conclusions declares primary are tested with Holm's correction (evaluation.primaries)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
 from offroad_path.errors import InputError
-from offroad_path.evaluation.bootstrap import Interval, Resampling, block_sums, interval, paired_interval
+from offroad_path.evaluation.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.scores import SCORES, Score, iou
@@ -35,32 +36,47 @@ def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> li
 
 
 @dataclass
-class BlockBootstrap:
-    """The test set's blocks of driving (one label per item) and how to resample them: intervals on
-    any per-item statistic, over all items or a subset (a condition group: only its blocks)."""
+class HierarchicalBootstrap:
+    """The test set's blocks of driving (one label per item: (sequence, block), a sequence being one
+    test world) and how to resample them: draws of any per-item statistic, (N, k) or per training
+    seed (S, N, k), over all items or a subset (a condition group: only its blocks and worlds)."""
 
     blocks: list[Hashable]
     resampling: Resampling
 
-    def _sums(self, per_item: np.ndarray, mask: np.ndarray | None) -> np.ndarray | None:
+    def _sums(self, per_item: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, list[Hashable]] | None:
         keep = np.ones(len(self.blocks), bool) if mask is None else mask
         blocks = [b for b, k in zip(self.blocks, keep, strict=True) if k]
-        return block_sums(np.asarray(per_item)[keep], blocks) if len(set(blocks)) >= 2 else None
+        if len(set(blocks)) < 2:
+            return None
+        return block_sums(np.asarray(per_item)[..., keep, :], blocks), worlds_of(blocks)
+
+    def draws(self, per_item: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Draws | None:
+        """None with fewer than 2 blocks to resample."""
+        found = self._sums(per_item, mask)
+        return None if found is None else score_draws(*found[:1], score, self.resampling, found[1])
+
+    def paired_draws(self, a: np.ndarray, b: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Draws | None:
+        found_a, found_b = self._sums(a, mask), self._sums(b, mask)
+        return None if found_a is None else paired_draws(found_a[0], found_b[0], score, self.resampling, found_a[1])
 
     def interval(self, per_item: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Interval | None:
-        """None with fewer than 2 blocks to resample."""
-        sums = self._sums(per_item, mask)
-        return None if sums is None else interval(sums, score, self.resampling)
+        found = self.draws(per_item, score, mask)
+        return None if found is None else found.interval()
 
     def paired(self, a: np.ndarray, b: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Interval | None:
-        sums_a, sums_b = self._sums(a, mask), self._sums(b, mask)
-        return None if sums_a is None else paired_interval(sums_a, sums_b, score, self.resampling)
+        found = self.paired_draws(a, b, score, mask)
+        return None if found is None else found.interval()
+
+    @property
+    def worlds(self) -> int:
+        return len(set(worlds_of(self.blocks)))
 
 
-def test_bootstrap(e: DictConfig, samples: list[Sample], block_m: float) -> BlockBootstrap:
-    """The block bootstrap of the test samples (evaluate.bootstrap; block_m: the split's)."""
+def test_bootstrap(e: DictConfig, samples: list[Sample], block_m: float) -> HierarchicalBootstrap:
+    """The hierarchical bootstrap of the test samples (evaluate.bootstrap; block_m: the split's)."""
     bootstrap = e.bootstrap
-    return BlockBootstrap(
+    return HierarchicalBootstrap(
         sample_blocks(samples, Path(e.labels_dir), block_m), Resampling(bootstrap.resamples, bootstrap.seed, bootstrap.level)
     )
 
@@ -85,9 +101,9 @@ def comparisons(runs: list[str]) -> list[tuple[str, str, Side, Side]]:
 
 
 class Uncertainty:
-    """95 % block-bootstrap intervals (evaluate.bootstrap) on every run's IoU and on the comparisons."""
+    """95 % hierarchical-bootstrap intervals (evaluate.bootstrap) on every run's IoU and on the comparisons."""
 
-    def __init__(self, bootstrap: BlockBootstrap, block_m: float) -> None:
+    def __init__(self, bootstrap: HierarchicalBootstrap, block_m: float) -> None:
         self.bootstrap, self.block_m = bootstrap, block_m
         self.resampling = bootstrap.resampling
         self.blocks = len(set(bootstrap.blocks))
@@ -96,6 +112,7 @@ class Uncertainty:
         self.others: dict[tuple[str, str], dict[str, Interval]] = {}  # precision, recall, accuracy
         self.over_seeds: dict[tuple[str, str], tuple[float, float]] = {}  # (mean, sample sd) of the seeds' IoU, with several
         self.differences: list[tuple[str, str, Interval]] = []  # (metrics key, title, a - b)
+        self.draws: dict[str, Draws] = {}  # metrics key -> the difference's resamples (for the primaries)
 
     def score(self, test: TestSet) -> None:
         self.seeds = test.seeds
@@ -106,12 +123,15 @@ class Uncertainty:
                 ious = [pooled(c).iou for c in per_seed]
                 self.over_seeds[key] = (float(np.mean(ious)), float(np.std(ious, ddof=1)))
         b = self.bootstrap
-        self.intervals = {key: b.interval(counts, iou) for key, counts in test.counts.items()}
+        per_seed = {key: np.stack(seeds) for key, seeds in test.seed_counts.items()}  # (S, N, 4)
+        self.intervals = {key: b.interval(counts, iou) for key, counts in per_seed.items()}
         self.others = {
             key: {name: b.interval(counts, SCORES[name]) for name in ("precision", "recall", "accuracy")}
-            for key, counts in test.counts.items()
+            for key, counts in per_seed.items()
         }
-        self.differences = [(key, title, b.paired(test.counts[x], test.counts[y], iou)) for key, title, x, y in comparisons(test.runs)]
+        for key, title, x, y in comparisons(test.runs):
+            self.draws[key] = b.paired_draws(per_seed[x], per_seed[y], iou)
+            self.differences.append((key, title, self.draws[key].interval()))
 
     def markdown(self) -> str:
         r = self.resampling
@@ -119,17 +139,20 @@ class Uncertainty:
             return f"\n## Uncertainty\n\nThe test set is {self.blocks} block of {self.block_m:g} m of driving: no interval can be drawn.\n"
         lines = [
             "\n## Uncertainty\n",
-            f"{r.level:.0%} percentile intervals from {r.count} resamples (seed {r.seed}) of the test set's {self.blocks} blocks of "
-            f"{self.block_m:g} m of driving, drawn with replacement; a comparison scores both methods on the same resamples "
-            "(paired). An interval that holds 0: no difference measured.\n",
+            f"{r.level:.0%} percentile intervals from {r.count} hierarchical resamples (seed {r.seed}): the test set's "
+            f"{self.bootstrap.worlds} test worlds drawn with replacement, then within each drawn world its blocks of "
+            f"{self.block_m:g} m of driving ({self.blocks} in all), then the {len(self.seeds)} training seed(s); a comparison "
+            "scores both methods on the same draw (paired). The intervals cover which worlds and stretches of driving were "
+            "tested and which seeds trained the networks, not other worlds' looks (every test world is drawn from the same "
+            "generator). An interval that holds 0: no difference measured. These comparisons are exploratory except those "
+            "evaluate.conclusions declares primary (the section below).\n",
         ]
         runs = list(dict.fromkeys(run for run, _ in self.intervals))
         columns = ["IoU, raw [95 % interval]", "IoU, post-processed [95 % interval]"]
         if self.over_seeds:
             lines.append(
-                f"Each method's counts are pooled over its {len(self.seeds)} training seeds ({', '.join(map(str, self.seeds))}), "
-                "and a comparison scores both methods' seed-pooled counts on the same resamples; beside each interval, "
-                "the mean and sample standard deviation of the seeds' own IoU.\n"
+                f"Each method's figure pools the counts of its {len(self.seeds)} training seeds ({', '.join(map(str, self.seeds))}); "
+                "beside each interval, the mean and sample standard deviation of the seeds' own IoU.\n"
             )
             columns = [columns[0], "raw, over seeds", columns[1], "post-processed, over seeds"]
         lines += ["| method | " + " | ".join(columns) + " |", "|" + " --- |" * (1 + len(columns))]
@@ -162,5 +185,5 @@ class Uncertainty:
         for (run, pp), (mean, sd) in self.over_seeds.items():
             intervals[f"{run}.{PP_KEY[pp]}"] |= {"seed_mean": round(mean, 6), "seed_sd": round(sd, 6)}
         differences = {key: entry(i, "iou_difference") for key, _, i in self.differences}
-        test_set = {"blocks": self.blocks, "seeds": len(self.seeds)}
+        test_set = {"worlds": self.bootstrap.worlds, "blocks": self.blocks, "seeds": len(self.seeds)}
         return {"uncertainty": {"test_set": test_set, **intervals, **differences}}

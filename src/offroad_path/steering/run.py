@@ -32,7 +32,7 @@ def predict(task: SteeringTask, loader) -> tuple[np.ndarray, np.ndarray]:
     true, predicted = [], []
     with torch.no_grad():
         for batch in loader:
-            predicted.append(task(batch["image"].to(task.device)).cpu())
+            predicted.append(task.angle(batch["image"].to(task.device)).cpu())
             true.append(batch["steering"])
     return torch.cat(true).numpy(), torch.cat(predicted).numpy()
 
@@ -63,6 +63,8 @@ def fit_steering(cfg: DictConfig) -> dict:
     data = SteeringDataModule(parts, steering, cfg.seed)
     task = SteeringTask.from_config(steering)
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")
+    if steering.target == "angle":  # the run identity of an angle PilotNet, as before the curvature target existed
+        outputs = (*outputs, "target", "wheelbase_m")
     settings = {
         "block_m": cfg.split.block_m,
         "guard_m": cfg.split.guard_m,
@@ -89,7 +91,7 @@ def fit_steering(cfg: DictConfig) -> dict:
         scatter_plot(true, predicted, tmp / "scatter.png")
         return {**steering_metrics(true, predicted, steering.lock_deg, steering.steering_ratio), "by_true_magnitude": bins}
 
-    stage = steering_stage(steering.slip)
+    stage = steering_stage(steering.slip, steering.target)
     spec = RunSpec(
         stage=stage,
         out_dir=Path(steering.out_dir),
@@ -100,9 +102,9 @@ def fit_steering(cfg: DictConfig) -> dict:
         write_more=write_predictions,
         input_size=(steering.height, steering.width),
         manifests={context: Path(steering.split_dir) / f"{name}.csv" for context, name in MANIFEST_CONTEXTS},
-        register_as=steering_folder(steering.slip).replace("steering", "pilotnet"),  # pilotnet, pilotnet_slip
+        register_as=steering_folder(steering.slip, steering.target).replace("steering", "pilotnet"),  # pilotnet, pilotnet_slip, ...
     )
-    tags = {"stage": stage, "model": "pilotnet", "slip": str(steering.slip).lower()}
+    tags = {"stage": stage, "model": "pilotnet", "slip": str(steering.slip).lower(), "target": steering.target}
     logger = training_logger(cfg, f"{stage} pilotnet", tags, OmegaConf.to_container(cfg, resolve=True))
     results = fit(cfg, task, data, spec, logger)
     metrics = {k: v for k, v in results.items() if k not in ("by_true_magnitude", "global_step") and not k.startswith("test/")}

@@ -1,7 +1,15 @@
 """The Lightning task of the steering baseline: MSE on the normalised angle, SGD with momentum and
-step decay as the thesis trained PilotNet; mean absolute error per split (torchmetrics)."""
+step decay as the thesis trained PilotNet; mean absolute error per split (torchmetrics).
+
+With target "curvature" the network learns tan(angle) / tan(lock) in place of angle / lock: the
+path's curvature over the recording vehicle's tightest, which another vehicle turns into its own
+angle as pure pursuit does, atan(its wheelbase x curvature) (driving.policies.PilotNetPolicy).
+`angle` gives the normalised angle of the recording vehicle either way, for predictions and metrics.
+"""
 
 from __future__ import annotations
+
+import math
 
 import torch
 import torch.nn.functional as F
@@ -31,7 +39,12 @@ class SteeringTask(BaseTask):
         lr_gamma: float,
         momentum: float,
         weight_decay: float,
+        target: str = "angle",
+        lock_deg: float | None = None,  # the recording vehicle's, for target curvature
+        wheelbase_m: float | None = None,
     ):
+        if target == "curvature" and not (lock_deg and wheelbase_m):
+            raise ValueError("a curvature PilotNet needs the recording vehicle's lock_deg and wheelbase_m")
         super().__init__()
         self.save_hyperparameters()
         self.configure()
@@ -39,7 +52,29 @@ class SteeringTask(BaseTask):
     @classmethod
     def from_config(cls, s: DictConfig) -> SteeringTask:
         """From the `steering` config node (conf/steering/default.yaml)."""
-        return cls(**{k: s[k] for k in ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")})
+        keys = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay", "target")
+        vehicle = {"lock_deg": s.lock_deg, "wheelbase_m": s.wheelbase_m} if s.target == "curvature" else {}
+        return cls(**{k: s[k] for k in keys}, **vehicle)
+
+    @property
+    def max_curvature(self) -> float | None:
+        """1/m of normalised output 1 (target curvature): tan(lock) / wheelbase; None for target angle."""
+        hp = self.hparams
+        return math.tan(math.radians(hp.lock_deg)) / hp.wheelbase_m if hp.get("target", "angle") == "curvature" else None
+
+    def learnt(self, steering: torch.Tensor) -> torch.Tensor:
+        """The normalised angles (N,) as the network learns them: unchanged, or tan(angle) / tan(lock)."""
+        if self.max_curvature is None:
+            return steering
+        lock = math.radians(self.hparams.lock_deg)
+        return torch.tan(steering * lock) / math.tan(lock)
+
+    def angle(self, image: torch.Tensor) -> torch.Tensor:  # (N, 3, H, W) -> (N,) normalised angle of the recording vehicle
+        out = self(image)
+        if self.max_curvature is None:
+            return out
+        lock = math.radians(self.hparams.lock_deg)
+        return torch.atan(out * math.tan(lock)) / lock
 
     def configure_models(self) -> None:
         self.model = PilotNet(self.hparams.width, self.hparams.height)
@@ -54,10 +89,10 @@ class SteeringTask(BaseTask):
         return self.model(image)
 
     def _step(self, batch: dict, split: str) -> torch.Tensor:
-        predicted = self(batch["image"])
-        loss = self.loss(predicted, batch["steering"], batch.get("weight"))
+        predicted, true = self(batch["image"]), self.learnt(batch["steering"])
+        loss = self.loss(predicted, true, batch.get("weight"))
         mae = self.mae[f"{split}_mae"]
-        mae.update(predicted, batch["steering"])
+        mae.update(predicted, true)
         self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(predicted), sync_dist=True)
         self.log(f"{split}/mae", mae, on_step=False, on_epoch=True, sync_dist=True)
         return loss
