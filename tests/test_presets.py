@@ -44,18 +44,20 @@ def test_full_preset_is_the_paper_size_with_the_projects_fixes(compose_config):
         assert paper[key.split(".")[0]][key.split(".")[1]] == full[key.split(".")[0]][key.split(".")[1]], key
     assert (full.split.strategy, full.split.val_fraction, full.label.occlusion.enabled, full.data.augment) == ("grouped", 0.1, True, True)
     assert full.train.max_steps == -1 and full.callbacks.early_stopping.patience > 0
-    assert full.synthesize.test_worlds.min_blocks == 30  # held-out test worlds, as the laptop default
+    # More held-out test worlds than the laptop's 30 blocks: the drive's powered route needs them.
+    assert full.synthesize.test_worlds.min_blocks > compose_config().synthesize.test_worlds.min_blocks
 
 
 def test_full_preset_drives_every_network_at_the_worlds_size(compose_config):
     laptop, full = compose_config(), compose_config("experiment=full")
     runs = list(full.evaluate.runs)
     assert len(runs) == 6
-    assert set(full.drive.arguments.steering) == {*runs, *(f"{r}+temporal" for r in runs), "pilotnet", "oracle", "straight"}
-    assert set(full.drive.arguments.traction) == {*runs, "pilotnet_slip", "pilotnet", "oracle", "straight"}
+    pilots = {"pilotnet", "pilotnet_curvature"}
+    assert set(full.drive.arguments.steering) == {*runs, *(f"{r}+temporal" for r in runs), *pilots, "oracle", "straight"}
+    assert set(full.drive.arguments.traction) == {*runs, "pilotnet_slip", *pilots, "oracle", "straight"}
     assert (full.drive.width, full.drive.height) == (full.world.width, full.world.height) == (512, 288)
     assert full.drive.starts_per_world * full.drive.length_m > laptop.drive.starts_per_world * laptop.drive.length_m
-    # The laptop drives fewer networks, smaller, for about 3 minutes; slip stays off in synthesis for both.
+    # The laptop drives fewer networks, smaller; slip stays off in synthesis for both.
     assert set(laptop.drive.arguments.steering) < set(full.drive.arguments.steering)
     assert not laptop.world.slip.enabled and not full.world.slip.enabled
 
@@ -98,12 +100,15 @@ def test_every_trained_network_writes_one_folder_per_seed_and_evaluate_reads_the
     both PilotNets' outputs are per seed, so that the stages of three seeds never share a file."""
     cfg = compose_config("seed=2", "model=fcn")
     assert list(compose_config().evaluate.seeds) == [0, 1, 2]
-    for path in (cfg.train.out_dir, cfg.postprocess.out_dir, cfg.steering.out_dir, cfg.drive.pilotnets.pilotnet_slip):
+    for path in (cfg.train.out_dir, cfg.postprocess.out_dir, cfg.steering.out_dir):
         assert "/seed2" in path, path
     assert cfg.steering.metrics_path.endswith("metrics/steering/seed2.json")
     assert cfg.steering.plots_path.endswith("metrics/steering/seed2_scatter.csv")
-    assert cfg.drive.pilotnets.pilotnet.endswith("steering/seed2/checkpoints/best.ckpt")  # drive drives one seed's networks
-    # evaluate's path-against-steering section pairs the first seed's maps with the first seed's PilotNet
-    assert cfg.evaluate.steering_from_paths.pilotnet_predictions.endswith("steering/seed0/predictions.csv")
-    later = compose_config("evaluate.seeds=[3,4]")
-    assert later.evaluate.steering_from_paths.pilotnet_predictions.endswith("steering/seed3/predictions.csv")
+    curvature = compose_config("seed=2", "steering.target=curvature").steering
+    assert (curvature.out_dir, curvature.metrics_path) == ("data/steering_curvature/seed2", "metrics/steering_curvature/seed2.json")
+    # The drive and evaluate's path-against-steering section read every seed of evaluate.seeds: {seed} in their paths.
+    assert list(cfg.drive.seeds) == [0, 1, 2]
+    for name, folder in (("pilotnet", "steering"), ("pilotnet_slip", "steering_slip"), ("pilotnet_curvature", "steering_curvature")):
+        assert cfg.drive.pilotnets[name] == f"data/{folder}/seed{{seed}}/checkpoints/best.ckpt"
+    assert cfg.evaluate.steering_from_paths.pilotnet_predictions == "data/steering/seed{seed}/predictions.csv"
+    assert list(compose_config("evaluate.seeds=[3,4]").drive.seeds) == [3, 4]

@@ -159,7 +159,7 @@ def misstated(readme: str) -> list[str]:
     for line in readme.splitlines():
         inside = line == PRIMARIES_HEAD or (inside and line.startswith("|"))
         cells = [c.strip() for c in line.strip("|").split("|")]
-        if not inside or len(cells) != 6 or "[" not in cells[3]:
+        if not inside or line == PRIMARIES_HEAD or len(cells) != 6 or "[" not in cells[3]:
             continue
         low, high = (float(x) for x in cells[3].split("[", 1)[1].split("]", 1)[0].split(","))
         null = 1.0 if cells[3].startswith("ratio") else 0.0
@@ -335,11 +335,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--check", action="store_true", help="exit 1 when the README's results differ from the metrics")
     args = parser.parse_args(argv)
     current = args.readme.read_text()
+    if args.check and (wrong := misstated(current)):
+        print(f"{args.readme}: primaries {', '.join(wrong)} state a direction inside their corrected interval", file=sys.stderr)
+        return 1
     wanted = with_results(current, generated(args.metrics), args.readme)
     if args.check:
-        if wrong := misstated(current):
-            print(f"{args.readme}: primaries {', '.join(wrong)} state a direction inside their corrected interval", file=sys.stderr)
-            return 1
         if wanted != current:
             print(
                 f"{args.readme}: its results disagree with {args.metrics}/ (run python -m offroad_path.evaluation.readme)", file=sys.stderr
