@@ -44,7 +44,7 @@ def overrides(inputs: Path, out: Path) -> list[str]:
             "drive.arguments.steering=[unet-none,unet-none+temporal,pilotnet,oracle,straight]",
             "drive.arguments.vehicle=[unet-none,pilotnet]", "drive.arguments.traction=[unet-none,pilotnet_slip,oracle]",
             "drive.length_m=8", "drive.starts_per_world=2", "drive.width=128", "drive.height=72", "drive.bootstrap.resamples=100",
-            "drive.workers=1",
+            "drive.workers=1", "drive.seeds=[0]", "evaluate.conclusions.primaries.closed_loop.compare=steering/unet-none_vs_pilotnet",
             f"drive.out_dir={out / 'drive'}", f"drive.metrics_path={out / 'drive.json'}",
             f"mlflow.tracking_uri=sqlite:///{out / 'mlflow.db'}"]  # fmt: skip
 
@@ -61,9 +61,16 @@ def test_outputs_follow_the_contract(driven):
     drive_dir = driven / "drive"
     metrics = json.loads((driven / "drive.json").read_text())
     assert json.loads((drive_dir / "drive.json").read_text()) == metrics
-    assert metrics["drives"] == {"worlds": ["test_000"], "starts_per_world": 2, "length_m": 8.0}
+    assert metrics["drives"] == {"worlds": ["test_000"], "starts_per_world": 2, "seeds": [0], "length_m": 8.0}
     assert list(metrics["steering"]["policies"]) == ["unet-none", "unet-none+temporal", "pilotnet", "oracle", "straight"]
     assert list(metrics["traction"]["path_minus_end_to_end"]) == ["unet-none - pilotnet_slip"]
+    # The primary this drive answers gets the exact test of its pooled counts, at each of Holm's 7 levels;
+    # the others name policies it did not drive and are not measured.
+    closed_loop = metrics["primaries"]["closed_loop"]
+    assert list(metrics["primaries"]) == ["closed_loop"] and len(closed_loop["intervals"]) == 7 and closed_loop["null"] == 1.0
+    policies = metrics["steering"]["policies"]
+    assert closed_loop["interventions"] == [policies["unet-none"]["interventions"], policies["pilotnet"]["interventions"]]
+    assert 0 < closed_loop["p_value"] <= 1 and closed_loop["route_needed_m"] == pytest.approx(1250, abs=20)
     for argument in ("steering", "vehicle", "traction"):
         assert (drive_dir / "trajectories" / argument / "test_000.png").stat().st_size > 1000
         for policy in metrics[argument]["policies"].values():

@@ -52,8 +52,8 @@ def check_policies(d: DictConfig) -> None:
                 if checkpoint is not None and not checkpoint.is_file():
                     known = ", ".join([*d.pilotnets, *BUILT_IN])
                     raise FileNotFoundError(
-                        f"drive.arguments.{argument}: policy {name!r} needs {checkpoint} (seed {seed} of drive.seeds), which does "
-                        f"not exist (policies: a run name of the train stage, that name{TEMPORAL}, or {known})"
+                        f"drive.arguments.{argument}: policy {name!r} needs {checkpoint}, which does not exist (seed {seed} of "
+                        f"drive.seeds; policies: a run name of the train stage, that name{TEMPORAL}, or {known})"
                     )
                 if base in d.pilotnets:
                     pilotnet_checkpoint(checkpoint)  # a path network's checkpoint given as PilotNet: refused here, not after work
@@ -68,11 +68,15 @@ def run_drive(cfg: DictConfig) -> dict:
 
     drive = cfg.drive
     check_policies(drive)
-    check_arguments_primaries(cfg.evaluate.conclusions, drive)
+    for name in check_arguments_primaries(cfg.evaluate.conclusions, drive):
+        log.warning("primary %s: this drive does not drive its policies: not measured", name)
     worlds = test_worlds(Path(drive.synthetic_dir), drive.worlds)
     check_worlds(worlds, cfg.world, drive)
-    if len(worlds) < 2:
-        raise ValueError(f"drive.worlds: {len(worlds)} test world is too few; the intervals resample worlds and need at least 2")
+    if len(worlds) * drive.starts_per_world < 2:
+        raise ValueError(
+            f"drive.starts_per_world: {len(worlds)} test world(s) x {drive.starts_per_world} start(s) is one drive; "
+            "intervals need at least 2 (more starts, or more test worlds)"
+        )
     params = drive_params(cfg.postprocess, drive.width, cfg.world.width)
     started = time.perf_counter()
     with atomic_directory(drive.out_dir, "drive", key="drive.out_dir") as tmp:

@@ -92,12 +92,14 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
 
 
 def check_primaries(e: DictConfig) -> None:
-    """Each primary evaluate answers names a comparison this run makes (before any work)."""
+    """Each primary names a comparison that can exist (before any work); one this run does not make
+    (evaluate.runs without its runs) is reported as not measured."""
     from offroad_path.evaluation.primaries import check_declared
     from offroad_path.evaluation.uncertainty import comparisons
 
     keys = {"uncertainty": {key for key, *_ in comparisons(list(e.runs))}, "steering_from_paths": {f"{run}_vs_pilotnet" for run in e.runs}}
-    check_declared(e.conclusions.primaries, keys)
+    for name in check_declared(e.conclusions.primaries, keys):
+        log.warning("primary %s (%s) is not among this run's comparisons: not measured", name, e.conclusions.primaries[name].compare)
 
 
 def training_runs(cfg: DictConfig) -> dict[str, str]:

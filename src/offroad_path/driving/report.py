@@ -220,7 +220,8 @@ def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str], con
         }
         sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores)}\n\n{comparison_table(comparisons)}\n\nExploratory: {sentence}\n")
         for name, (section, key) in mine.items():
-            if section == argument:
+            a, _, b = key.partition("_vs_")
+            if section == argument and a in by_policy and b in by_policy:
                 primaries[name] = primary(by_policy, name, key, conclusions)
                 sections.append(_primary_text(name, conclusions, primaries[name]))
     metrics["drives"] = {"worlds": worlds, "starts_per_world": d.starts_per_world, "seeds": seeds, "length_m": d.length_m}
@@ -242,9 +243,10 @@ def _primary_text(name: str, conclusions, entry: dict) -> str:
     )
 
 
-def check_arguments_primaries(conclusions, d) -> None:
-    """Each primary naming an argument compares two of that argument's policies (before any drive)."""
+def check_arguments_primaries(conclusions, d) -> list[str]:
+    """Before any drive: the primaries are well formed; returns those naming an argument that this
+    drive does not answer (its policies not driven), which are not measured."""
     from offroad_path.evaluation.primaries import check_declared
 
     available = {argument: {f"{a}_vs_{b}" for a in names for b in names if a != b} for argument, names in d.arguments.items()}
-    check_declared(conclusions.primaries, {a: available.get(a, set()) for a in ARGUMENTS})
+    return check_declared(conclusions.primaries, {a: available.get(a, set()) for a in ARGUMENTS})

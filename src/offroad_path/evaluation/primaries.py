@@ -95,10 +95,21 @@ def owned(declared: Mapping, sections: tuple[str, ...]) -> dict[str, tuple[str, 
     return found
 
 
-def check_declared(declared: Mapping, available: Mapping[str, set[str]], where: str = "evaluate.conclusions.primaries") -> None:
-    """InputError naming the primary whose compare names no comparison this stage makes (available:
-    section -> its comparison keys), before any work."""
-    for name, (section, key) in owned(declared, tuple(available)).items():
-        if key not in available[section]:
-            valid = ", ".join(f"{section}/{k}" for k in sorted(available[section]))
-            raise InputError(f"{where}.{name}.compare", f"{section}/{key} is no comparison of this run (valid: {valid})")
+# The sections a primary's compare can name: evaluate's and the drive's arguments (driving.report.ARGUMENTS).
+SECTIONS = ("uncertainty", "steering_from_paths", "steering", "vehicle", "traction")
+
+
+def check_declared(declared: Mapping, available: Mapping[str, set[str]], where: str = "evaluate.conclusions.primaries") -> list[str]:
+    """Before any work: InputError naming a primary whose compare names no known section or is not
+    <section>/<a>_vs_<b>; returns the primaries this stage owns (available: section -> the
+    comparison keys this run makes) but does not make, which its report gives as not measured."""
+    missing = []
+    for name, q in declared.items():
+        section, _, key = str(q["compare"]).partition("/")
+        if section not in SECTIONS or "_vs_" not in key:
+            raise InputError(
+                f"{where}.{name}.compare", f"{q['compare']!r} is not <section>/<a>_vs_<b> with a section of {', '.join(SECTIONS)}"
+            )
+        if section in available and key not in available[section]:
+            missing.append(name)
+    return missing

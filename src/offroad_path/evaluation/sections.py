@@ -325,7 +325,7 @@ class PrimaryQuestions:
             "| --- | --- | --- | --- | --- |",
         ]
         for name, (section, key) in self.mine.items():
-            entry = self.found.get(name)
+            entry = self.found.get(name)  # None: this run does not make the comparison (evaluate.runs)
             shown = Interval(entry["estimate"], *entry["intervals"][0]).difference_text() if entry else "not measured"
             p = f"{entry['p_value']:.4f}" if entry else ""
             lines.append(f"| {name} | {q.primaries[name].claim} | {section}/{key} | {shown} | {p} |")
