@@ -91,7 +91,8 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
     new = {"pretrain@tiny", "train_scratch@tiny-0", "train_pretrained@tiny-0", "postprocess@tiny-none-0", "postprocess@tiny-segmentation-0"}
     assert new <= stages, listed.stdout + listed.stderr
     seeds = OmegaConf.load(repo / "conf" / "evaluate" / "default.yaml").seeds
-    assert {f"train_steering@{s}" for s in seeds} | {f"train_steering_slip@{s}" for s in seeds} <= stages  # both PilotNets per seed
-    # synthesize, label, split, evaluate, drive; two PilotNets per seed; per network a pretraining and, per seed,
+    pilotnets = ("train_steering", "train_steering_slip", "train_steering_curvature")
+    assert {f"{stage}@{s}" for stage in pilotnets for s in seeds} <= stages  # the three PilotNets per seed
+    # synthesize, label, split, evaluate, drive; three PilotNets per seed; per network a pretraining and, per seed,
     # two trainings and two post-processings
-    assert len(seeds) == 3 and len(stages) == 5 + 2 * len(seeds) + 4 * (1 + 4 * len(seeds))
+    assert len(seeds) == 3 and len(stages) == 5 + 3 * len(seeds) + 4 * (1 + 4 * len(seeds))

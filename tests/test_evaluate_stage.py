@@ -3,6 +3,7 @@ known: the labels themselves (perfect) and the labels shifted sideways."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import sqlite3
 import subprocess
@@ -125,11 +126,22 @@ def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path
                           "unet-none_vs_fcn-none", "unet-none_postprocessed_vs_raw", "fcn-none_postprocessed_vs_raw"}  # fmt: skip
     report = (tmp_path / "evaluation" / "results.md").read_text()
     assert "## Uncertainty" in report and "| U-Net (none) - FCN (none) |" in report
+    assert found["test_set"]["worlds"] == 1  # one rendered drive: its blocks are resampled within it
+    # The primaries this run makes (U-Net's post-processing, U-Net against PilotNet open loop), each at
+    # Holm's 7 levels around the same estimate as its comparison; the others (runs not evaluated): not measured.
+    primaries = json.loads((tmp_path / "metrics.json").read_text())["primaries"]
+    assert set(primaries) == {"postprocessing", "open_loop"}
+    assert primaries["open_loop"]["estimate"] == pytest.approx(against["mae_difference"], abs=1e-6)
+    assert primaries["postprocessing"]["estimate"] == pytest.approx(found["unet-none_postprocessed_vs_raw"]["iou_difference"], abs=1e-6)
+    for entry in primaries.values():
+        levels = entry["intervals"]
+        assert len(levels) == 7 and all(a[0] >= b[0] and a[1] <= b[1] for a, b in itertools.pairwise(levels))
+    assert "## Primary questions" in report and "| ranking |" in report and "not measured" in report
 
 
 def test_outputs_follow_the_contract(scored, tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert set(metrics) == {"unet-none", "fcn-none", "uncertainty", "baselines", "steering_from_paths", "by_condition"}
+    assert set(metrics) == {"unet-none", "fcn-none", "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition"}
     assert metrics["unet-none"]["raw"]["iou"] == 1.0
     # by condition (the rendered drive's conditions.csv): the perfect maps score 1 in every group that has frames
     groups = metrics["by_condition"]
