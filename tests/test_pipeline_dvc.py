@@ -43,9 +43,11 @@ def check_closed_loop(repo: Path, steering: dict) -> None:
     # every argument's policies from both starts of the test world, the same as in the other place
     drove = json.loads((repo / "metrics" / "drive.json").read_text())
     assert {a: list(drove[a]["policies"]) for a in ("steering", "vehicle", "traction")} == {
-        "steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet"],
+        "steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet_curvature"],
         "traction": ["unet-segmentation", "pilotnet_slip"]}  # fmt: skip
     assert {p.name for p in (repo / "data" / "drive" / "trajectories").iterdir()} == {"steering", "vehicle", "traction"}
+    # The three arguments' primaries, each driven here: the exact test of their counts at Holm's levels.
+    assert set(drove["primaries"]) == {"closed_loop", "another_vehicle", "slippery_ground"}
 
 
 @pytest.mark.slow(seconds=210)
@@ -56,7 +58,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     elsewhere = tiny_repo(repo_copy.parent / "another" / "place" / "repo")
     out, _ = dvc_at_once([(repo_copy, ["repro"]), (elsewhere, ["repro", "split"])])
     ran = set(re.findall(r"Running stage '([^']+)'", out))
-    stages = {"synthesize", "label", "split", "evaluate", "train_steering@0", "train_steering_slip@0", "drive"}
+    stages = {"synthesize", "label", "split", "evaluate", "train_steering@0", "train_steering_slip@0", "train_steering_curvature@0", "drive"}
     stages |= {f"pretrain@{m}" for m in GRID}
     stages |= {f"{s}@{m}-0" for s in ("train_scratch", "train_pretrained") for m in GRID}
     stages |= {f"postprocess@{m}-{p}-0" for m in GRID for p in ("none", "segmentation")}
@@ -76,7 +78,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     # evaluate: every run with and without post-processing, the baselines, curves and figures.
     metrics = json.loads((repo_copy / "metrics" / "evaluation.json").read_text())
     assert set(metrics) == {f"{m}-{p}" for m in GRID for p in ("none", "segmentation")} | {
-        "uncertainty", "baselines", "steering_from_paths", "by_condition"}  # fmt: skip
+        "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition"}  # fmt: skip
     assert all(0 <= metrics[r][pp]["accuracy"] <= 1 for r in metrics if "raw" in metrics[r] for pp in ("raw", "postprocessed"))
     # path against steering: PilotNet (train_steering ran before evaluate), every run, the ceiling
     runs = {r for r in metrics if "raw" in metrics[r]}

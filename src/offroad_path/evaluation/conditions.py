@@ -74,6 +74,7 @@ class ConditionTable:
     iou: dict[str, list[float]]  # method -> IoU per condition (nan for an empty group)
     sequences: list[int] = field(default_factory=list)  # test sequences each group's frames come from
     intervals: dict[str, list[Interval | None]] = field(default_factory=dict)  # method -> per condition; None: < 2 blocks
+    minus_baseline: dict[str, list[Interval | None]] = field(default_factory=dict)  # method -> its IoU minus the baseline's, paired
 
     def _cell(self, method: str, i: int) -> str:
         found = self.intervals.get(method, [None] * len(self.keys))[i]
@@ -96,6 +97,8 @@ class ConditionTable:
                 row[method_keys[m]] = None if v[i] != v[i] else round(v[i], 6)
                 if (found := self.intervals.get(m, [None] * len(self.keys))[i]) is not None:
                     row[f"{method_keys[m]}.interval"] = [round(found.low, 6), round(found.high, 6)]
+                if (gap := self.minus_baseline.get(m, [None] * len(self.keys))[i]) is not None:
+                    row[f"{method_keys[m]}.minus_prior"] = [round(gap.estimate, 6), round(gap.low, 6), round(gap.high, 6)]
             out[key] = row
         return out
 
@@ -105,10 +108,12 @@ def by_condition(
     per_image: dict[str, np.ndarray],
     bootstrap: HierarchicalBootstrap | None = None,
     sequences: list[str] | None = None,
+    baseline: str | None = None,
 ) -> ConditionTable:
     """per_image: method -> its (N, 4) per-image counts [tp, fp, tn, fn] over the same samples, or per
     training seed (S, N, 4); bootstrap: intervals over each group's worlds, blocks and seeds;
-    sequences: each sample's, to count them per group."""
+    sequences: each sample's, to count them per group; baseline: the method (of per_image) every other
+    is compared with in each group, paired on the same draws (the mean path prior)."""
     masks = [np.array([test(row) for row in conditions], bool) for _, _, test in GROUPS]
     iou = {
         m: [pooled(counts[..., mask, :].reshape(-1, 4)).iou if mask.any() else float("nan") for mask in masks]
@@ -119,4 +124,10 @@ def by_condition(
         table.sequences = [len({s for s, keep in zip(sequences, mask, strict=True) if keep}) for mask in masks]
     if bootstrap is not None:
         table.intervals = {m: [bootstrap.interval(counts, iou_score, mask) for mask in masks] for m, counts in per_image.items()}
+        if baseline is not None:
+            table.minus_baseline = {
+                m: [bootstrap.paired(counts, per_image[baseline], iou_score, mask) for mask in masks]
+                for m, counts in per_image.items()
+                if m != baseline
+            }
     return table

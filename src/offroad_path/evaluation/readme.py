@@ -251,7 +251,28 @@ def _conditions(evaluation: dict, runs: list[str]) -> list[str]:
             bounds = row.get(f"{name}.interval")
             cells.append(_f(row.get(name)) + (f" [{bounds[0]:.3f}, {bounds[1]:.3f}]" if bounds else ""))
         lines.append(f"| {titles.get(key, key)} | {row['frames']} | {row.get('sequences', 'n/a')} | " + " | ".join(cells) + " |")
-    return [*lines, ""]
+    return [*lines, "", *_against_prior(c, runs, "off_track", titles.get("off_track", "off_track"))]
+
+
+def _against_prior(c: dict, runs: list[str], key: str, title: str) -> list[str]:
+    """One group's networks against the mean path prior, paired (exploratory): a direction only where the interval excludes 0."""
+    row = c.get(key, {})
+    gaps = {run: row[f"{run}.minus_prior"] for run in runs if f"{run}.minus_prior" in row}
+    if not gaps or row.get("mean_path_prior") is None:
+        return []
+    below = [run for run, (_, _, high) in gaps.items() if high < 0]
+    above = [run for run, (_, low, _) in gaps.items() if low > 0]
+    ious = [row[run] for run in gaps]
+    verdict = (
+        f"{len(below)} of {len(gaps)} networks score below it and {len(above)} above it (paired intervals excluding 0), "
+        f"the rest: no difference measured"
+    )
+    spread = ", ".join(f"{method_title(run)} {g[0]:+.3f} [{g[1]:+.3f}, {g[2]:+.3f}]" for run, g in gaps.items())
+    return [
+        f"Exploratory, {title} ({row['frames']} test images from {row.get('sequences', 'n/a')} sequences): the networks score IoU "
+        f"{min(ious):.3f} to {max(ious):.3f} against the mean path prior's {row['mean_path_prior']:.3f}; {verdict}. Network minus "
+        f"prior: {spread}.\n"
+    ]
 
 
 def _temporal(evaluation: dict) -> list[str]:
@@ -269,6 +290,14 @@ def _temporal(evaluation: dict) -> list[str]:
         lines.append(
             f"| {method_title(run)} | {row['iou']:.3f} | {row['iou_filtered']:.3f} | {gain.difference_text() if gain else 'n/a'} |"
         )
+    gains = {run: row["iou_filtered"] - row["iou"] for run, row in t.items()}
+    lower = [run for run, row in t.items() if row.get("gain_high") is not None and row["gain_high"] < 0]
+    higher = [run for run, row in t.items() if row.get("gain_low") is not None and row["gain_low"] > 0]
+    lines += [
+        "",
+        f"The temporal filter (exploratory) changes IoU by {min(gains.values()):+.3f} to {max(gains.values()):+.3f}: lower for "
+        f"{len(lower)} and higher for {len(higher)} of {len(gains)} networks by intervals excluding 0 (the first training seed of each).",
+    ]
     return [*lines, ""]
 
 

@@ -202,7 +202,7 @@ class ByCondition:
             return
         per_image = {method_title(run): np.stack(test.seed_counts[run, "no"]) for run in test.runs} | {"mean path prior": test.prior_counts}
         self.keys = {method_title(run): run for run in test.runs} | {"mean path prior": "mean_path_prior"}
-        self.table = by_condition(conditions, per_image, self.bootstrap, [s.sequence for s in test.samples])
+        self.table = by_condition(conditions, per_image, self.bootstrap, [s.sequence for s in test.samples], "mean path prior")
 
     def markdown(self) -> str:
         if self.table is None:
