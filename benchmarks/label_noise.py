@@ -1,18 +1,23 @@
-"""How much odometry error the labels tolerate: labels made from poses with a controlled drift,
-each scored against the labels of the true poses, and one network (U-Net, laptop preset, seed 0)
-trained on each and scored on the held-out test worlds' exact labels.
+"""How much odometry error the labels tolerate: labels made from poses with a controlled error,
+each scored against the labels of the true poses, and U-Net (laptop preset, seeds 0-2) trained on
+each and scored on the held-out test worlds' exact labels, with a hierarchical interval (test
+worlds, their blocks, the seeds) of each row minus the true poses' row, paired seed by seed.
 
-    python benchmarks/label_noise.py [--drifts 0.5 1.7 3.4 8.5] [--out docs/images/label_noise.png]
+    python benchmarks/label_noise.py [--drifts 0.5 1.7 3.4 8.5] [--kinds pitch height roll drops reset]
+                                     [--seeds 0 1 2] [--out docs/images/label_noise.png]
 
 Needs a finished `dvc repro` (data/synthetic, and data/labels for the windowed VO's poses). The
 variants: the true poses; the pipeline's windowed VO (data/labels/<seq>/poses_vo.txt); the frame-to-
 frame VO (a label run with label.odometry.method=frame_to_frame); the true poses with a smooth
 random-walk error in step length and heading (offroad_path.odometry.perturb) set by each --drifts
-value (which makes a drift of about 0.6 times it; the table gives the drift measured). Only the
-training drives get the variant's poses; the test worlds are labelled from their true poses in every
-variant, so every network is scored against the same exact labels. Each variant: the label stage
-(label.poses.source=file), the split stage, the train stage, then the test IoU the evaluate stage's
-way (pooled at 0.5). Prints a Markdown table and writes a figure.
+value (which makes a drift of about 0.6 times it; the table gives the drift measured); and each of
+--kinds at --kind-setting (offroad_path.odometry.perturb.PoseError): the same smooth error in pitch,
+in camera height or in roll, steps the VO lost (--drops-per-km) and a reset of the pose chain in the
+middle of every drive. Only the training drives get the variant's poses; the test worlds are
+labelled from their true poses in every variant, so every network is scored against the same exact
+labels. Each variant: the label stage (label.poses.source=file), the split stage, the train stage
+once per seed, then the test IoU the evaluate stage's way (counts pooled over the seeds at 0.5).
+Prints a Markdown table and writes a figure.
 """
 
 from __future__ import annotations
@@ -28,14 +33,20 @@ from pathlib import Path
 import numpy as np
 
 from offroad_path.data.labels import read_label_run
+from offroad_path.data.manifest import read_manifest
+from offroad_path.evaluation.bootstrap import Resampling
 from offroad_path.evaluation.metrics import counts, pooled
-from offroad_path.odometry.perturb import drifted_poses
+from offroad_path.evaluation.scores import iou
+from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
+from offroad_path.odometry.perturb import PoseError, drifted_poses, erroneous_poses
 from offroad_path.odometry.trajectory import drift
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import find_sequences, open_sequence
 
 sys.path.insert(0, str(Path(__file__).parent))
-from seed_spread import pooled_test_iou
+from seed_spread import key, test_counts
+
+BLOCK_M = 20.0  # the split's blocks of driving, which the intervals resample
 
 
 def run(*args: str) -> None:
@@ -68,16 +79,61 @@ def label_agreement(labels: Path, exact: Path) -> float:
     return pooled(total[None]).iou
 
 
+def kind_error(kind: str, setting: float, drops_per_km: float) -> PoseError:
+    """The PoseError of one --kinds name: a smooth error at `setting` in pitch, height or roll, lost
+    steps at drops_per_km, or one reset in the middle of every drive."""
+    return {
+        "pitch": PoseError(pitch=setting),
+        "height": PoseError(height=setting),
+        "roll": PoseError(roll=setting),
+        "drops": PoseError(drops_per_km=drops_per_km),
+        "reset": PoseError(resets=1),
+    }[kind]
+
+
+def seed_counts(folder: Path, seeds: list[int]) -> tuple[list[str], np.ndarray]:
+    """The test frames' keys and their counts (seeds, frames, 4), each seed's run at folder/run<seed>."""
+    per_seed = [test_counts(folder / f"run{seed}", None) for seed in seeds]
+    keys = sorted(per_seed[0])
+    return keys, np.array([[found[k] for k in keys] for found in per_seed], float)
+
+
+def pose_variants(
+    args: argparse.Namespace, true: dict[str, np.ndarray], training: list[str], tmp: Path
+) -> dict[str, dict[str, np.ndarray]]:
+    """Each row's poses of the training drives: the true ones, the two odometries', each drift setting and each kind."""
+    run("offroad_path.label", "label.odometry.method=frame_to_frame", f"label.out_dir={tmp / 'f2f'}",
+        f"label.metrics_path={tmp / 'f2f.json'}", "mlflow.enabled=false")  # fmt: skip
+    variants: dict[str, dict[str, np.ndarray]] = {"true poses": {}, "windowed VO (the pipeline's)": {}, "frame-to-frame VO": {}}
+    for name in training:
+        n = len(true[name])
+        variants["windowed VO (the pipeline's)"][name] = read_poses(Path(f"data/labels/{name}/poses_vo.txt"), n)
+        variants["frame-to-frame VO"][name] = read_poses(tmp / "f2f" / name / "poses_vo.txt", n)
+    for percent in args.drifts:
+        variants[f"true poses, drift setting {percent:g}"] = {
+            name: drifted_poses(true[name], percent, seed=args.seed + i) for i, name in enumerate(training)
+        }
+    for kind in args.kinds:
+        error = kind_error(kind, args.kind_setting, args.drops_per_km)
+        variants[f"true poses, {error.describe()}"] = {
+            name: erroneous_poses(true[name], error, seed=args.seed + i) for i, name in enumerate(training)
+        }
+    return variants
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--drifts", type=float, nargs="+", default=[0.5, 1.7, 3.4, 8.5])
+    parser.add_argument("--drifts", type=float, nargs="*", default=[0.5, 1.7, 3.4, 8.5])
+    parser.add_argument("--kinds", nargs="*", default=["pitch", "height", "roll", "drops", "reset"], help="PoseError kinds")
+    parser.add_argument("--kind-setting", type=float, default=3.4, help="pitch, height and roll's setting (percent units)")
+    parser.add_argument("--drops-per-km", type=float, default=20.0, help="the drops kind: lost VO steps per km")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="U-Net's training seeds per row")
     parser.add_argument("--out", type=Path, default=Path("docs/images/label_noise.png"))
-    parser.add_argument("--seed", type=int, default=0, help="of the drift's random walk")
+    parser.add_argument("--seed", type=int, default=0, help="of the errors' random draws")
     parser.add_argument("--redraw", type=Path, help="only draw the figure from the JSON rows a run printed last")
-    parser.add_argument("--seed-sd", type=float, default=0.008, help="U-Net's seed-to-seed sd (seed study), drawn as a band")
     args = parser.parse_args()
     if args.redraw:
-        figure(json.loads(args.redraw.read_text()), args.out, args.seed_sd)
+        figure(json.loads(args.redraw.read_text()), args.out)
         return
     recordings = {p.name: open_sequence(p) for p in find_sequences("data/synthetic")}
     true = {name: seq.poses for name, seq in recordings.items()}
@@ -85,20 +141,12 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        run("offroad_path.label", "label.odometry.method=frame_to_frame", f"label.out_dir={tmp / 'f2f'}",
-            f"label.metrics_path={tmp / 'f2f.json'}", "mlflow.enabled=false")  # fmt: skip
-        variants: dict[str, dict[str, np.ndarray]] = {"true poses": {}, "windowed VO (the pipeline's)": {}, "frame-to-frame VO": {}}
-        for name in training:
-            n = len(true[name])
-            variants["windowed VO (the pipeline's)"][name] = read_poses(Path(f"data/labels/{name}/poses_vo.txt"), n)
-            variants["frame-to-frame VO"][name] = read_poses(tmp / "f2f" / name / "poses_vo.txt", n)
-        for percent in args.drifts:
-            variants[f"true poses, drift setting {percent:g}"] = {
-                name: drifted_poses(true[name], percent, seed=args.seed + i) for i, name in enumerate(training)
-            }
+        variants = pose_variants(args, true, training, tmp)
         print("| labels from | translation drift over 20 m (%) | heading drift (deg/m) | training labels against exact (IoU) "
-              "| U-Net test IoU (exact test labels) | seconds |\n| --- | --- | --- | --- | --- | --- |", flush=True)  # fmt: skip
+              f"| U-Net test IoU, seeds {', '.join(map(str, args.seeds))} [95 %] | minus true poses [95 %] | seconds |\n"
+              "| --- | --- | --- | --- | --- | --- | --- |", flush=True)  # fmt: skip
         exact = tmp / "true_poses" / "labels"
+        reference: np.ndarray | None = None
         for title, estimated in variants.items():
             start = time.perf_counter()
             folder = tmp / "".join(c if c.isalnum() else "_" for c in title)
@@ -107,24 +155,34 @@ def main() -> None:
             run("offroad_path.label", "label.poses.source=file", f"label.poses.file='{pattern}'", f"label.out_dir={folder / 'labels'}",
                 f"label.metrics_path={folder / 'label.json'}", "mlflow.enabled=false")  # fmt: skip
             run("offroad_path.split", f"split.labels_dir={folder / 'labels'}", f"split.out_dir={folder / 'split'}")
-            run("offroad_path.train", "model=unet", "pretraining=none", "seed=0", f"data.split_dir={folder / 'split'}",
-                f"train.out_dir={folder / 'run'}", "resume=false", "mlflow.enabled=false")  # fmt: skip
+            for seed in args.seeds:
+                run("offroad_path.train", "model=unet", "pretraining=none", f"seed={seed}", f"data.split_dir={folder / 'split'}",
+                    f"train.out_dir={folder / f'run{seed}'}", "resume=false", "mlflow.enabled=false")  # fmt: skip
+            keys, found = seed_counts(folder, args.seeds)
+            if reference is None:  # the true poses' row, first: the test frames every row is compared on
+                reference, reference_keys = found, keys
+                samples = {key(s): s for s in read_manifest(folder / "split" / "test.csv")}
+                bootstrap = HierarchicalBootstrap(sample_blocks([samples[k] for k in keys], folder / "labels", BLOCK_M), Resampling())
+            if keys != reference_keys:
+                sys.exit(f"{title}: its test frames differ from the true poses' row (the test worlds must be labelled alike)")
+            score = bootstrap.interval(found, iou)
+            gain = bootstrap.paired(found, reference, iou)
             drifts = [drift(poses[name], true[name])[0] for name in training]
             translation = float(np.mean([d.translation_drift_pct for d in drifts if d]))
             rotation = float(np.mean([d.rotation_drift_deg_per_m for d in drifts if d]))
             agreement = label_agreement(folder / "labels", exact)
-            iou = pooled_test_iou(folder / "run")
             rows.append({"labels": title, "translation_drift_pct": translation, "rotation_drift_deg_per_m": rotation,
-                         "label_iou": agreement, "test_iou": iou})  # fmt: skip
-            print(f"| {title} | {translation:.2f} | {rotation:.4f} | {agreement:.3f} | {iou:.3f} | {time.perf_counter() - start:.0f} |",
-                  flush=True)  # fmt: skip
+                         "label_iou": agreement, "test_iou": score.estimate, "low": score.low, "high": score.high,
+                         "minus_true": [gain.estimate, gain.low, gain.high]})  # fmt: skip
+            print(f"| {title} | {translation:.2f} | {rotation:.4f} | {agreement:.3f} | {score.text()} | {gain.difference_text()} | "
+                  f"{time.perf_counter() - start:.0f} |", flush=True)  # fmt: skip
     print(json.dumps(rows))
-    figure(rows, args.out, args.seed_sd)
+    figure(rows, args.out)
 
 
-def figure(rows: list[dict], out: Path, seed_sd: float) -> None:
-    """Both IoUs against the measured drift; the band: two seed standard deviations around the
-    test IoU from exact labels, inside which no difference is a finding."""
+def figure(rows: list[dict], out: Path) -> None:
+    """Both IoUs against the measured drift; the test IoU with its hierarchical interval (worlds,
+    blocks, seeds), and the true poses' interval as a band."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -132,14 +190,16 @@ def figure(rows: list[dict], out: Path, seed_sd: float) -> None:
 
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=120)
     x = np.array([max(r["translation_drift_pct"], 0.01) for r in rows])  # exact poses drawn at 0.01 % on the log axis
-    exact = next(r["test_iou"] for r in rows if r["translation_drift_pct"] < 1e-6)
-    ax.axhspan(exact - 2 * seed_sd, exact + 2 * seed_sd, color="C1", alpha=0.15, label="exact labels' test IoU ± 2 seed sd")
+    exact = next(r for r in rows if r["labels"] == "true poses")
+    ax.axhspan(exact["low"], exact["high"], color="C1", alpha=0.15, label="true poses' test IoU, 95 % interval")
     ax.plot(x, [r["label_iou"] for r in rows], "o", label="training labels against exact labels")
-    ax.plot(x, [r["test_iou"] for r in rows], "s", label="U-Net test IoU (exact test labels)")
+    low, high = np.array([r["low"] for r in rows]), np.array([r["high"] for r in rows])
+    y = np.array([r["test_iou"] for r in rows])
+    ax.errorbar(x, y, yerr=[y - low, high - y], fmt="s", capsize=2, label="U-Net test IoU (exact test labels), 95 %")
     for r, xi in zip(rows, x, strict=True):
-        if "setting" not in r["labels"]:  # the odometries and the exact poses; the settings read off the axis
-            ax.annotate(r["labels"].split(" (")[0], (xi, r["test_iou"]), fontsize=7, xytext=(0, -14), textcoords="offset points",
-                        rotation=-30)  # fmt: skip
+        if "setting" not in r["labels"]:  # the odometries, the exact poses and the other kinds; the settings read off the axis
+            ax.annotate(r["labels"].split(" (")[0].removeprefix("true poses, "), (xi, r["test_iou"]), fontsize=6,
+                        xytext=(0, -14), textcoords="offset points", rotation=-30)  # fmt: skip
     ax.set_xscale("log")
     ax.set_xlabel("odometry translation drift over 20 m (%; exact poses at 0.01)")
     ax.set_ylabel("IoU")
