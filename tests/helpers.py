@@ -152,8 +152,8 @@ def tiny_repo(repo: Path) -> Path:
         "pretrain": {"max_epochs": 1}, "steering": {"max_epochs": 1},
         "evaluate": {"temporal": {"enabled": False}},  # run three times here; tests/test_temporal.py scores it once
         # One policy of each kind, 4 m from two starts in the test world (tests/test_drive_stage.py drives more).
-        "drive": {"arguments": {"steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet_curvature"],
-                                "traction": ["unet-segmentation", "pilotnet_slip"]},
+        "drive": {"arguments": {"steering": ["unet-segmentation", "pilotnet", "oracle"],
+                                "vehicle": ["unet-segmentation", "pilotnet_curvature"], "traction": ["unet-segmentation", "pilotnet_slip"]},
                   "worlds": 1, "starts_per_world": 2, "length_m": 4.0, "respawn_m": 1.0, "width": 128, "height": 72, "video": False,
                   "bootstrap": {"resamples": 100}},
         "threads": 1, "experiment_name": "tiny",
