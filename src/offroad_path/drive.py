@@ -111,7 +111,8 @@ def log_to_mlflow(cfg: DictConfig, metrics: dict) -> None:
 
         from offroad_path.driving.report import ARGUMENTS
 
-        numbers = {k: v for k, v in flatten({a: m for a, m in metrics.items() if a in ARGUMENTS}).items() if isinstance(v, int | float)}
+        logged = flatten({a: m for a, m in metrics.items() if a in (*ARGUMENTS, "primaries")})
+        numbers = {k: v for k, v in logged.items() if isinstance(v, int | float)}
         mlflow.log_metrics({k.replace("+", "_"): v for k, v in numbers.items() if v == v})  # NaN is not a metric
         mlflow.log_artifacts(cfg.drive.out_dir)
 
