@@ -53,12 +53,15 @@ class HierarchicalBootstrap:
 
     def draws(self, per_item: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Draws | None:
         """None with fewer than 2 blocks to resample."""
-        found = self._sums(per_item, mask)
-        return None if found is None else score_draws(*found[:1], score, self.resampling, found[1])
+        if (found := self._sums(per_item, mask)) is None:
+            return None
+        sums, worlds = found
+        return score_draws(sums, score, self.resampling, worlds)
 
     def paired_draws(self, a: np.ndarray, b: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Draws | None:
-        found_a, found_b = self._sums(a, mask), self._sums(b, mask)
-        return None if found_a is None else paired_draws(found_a[0], found_b[0], score, self.resampling, found_a[1])
+        if (found_a := self._sums(a, mask)) is None or (found_b := self._sums(b, mask)) is None:
+            return None
+        return paired_draws(found_a[0], found_b[0], score, self.resampling, worlds=found_a[1])
 
     def interval(self, per_item: np.ndarray, score: Score, mask: np.ndarray | None = None) -> Interval | None:
         found = self.draws(per_item, score, mask)
@@ -145,7 +148,7 @@ class Uncertainty:
             "scores both methods on the same draw (paired). The intervals cover which worlds and stretches of driving were "
             "tested and which seeds trained the networks, not other worlds' looks (every test world is drawn from the same "
             "generator). An interval that holds 0: no difference measured. These comparisons are exploratory except those "
-            "evaluate.conclusions declares primary (the section below).\n",
+            "evaluate.conclusions declares primary (the Primary questions section).\n",
         ]
         runs = list(dict.fromkeys(run for run, _ in self.intervals))
         columns = ["IoU, raw [95 % interval]", "IoU, post-processed [95 % interval]"]
