@@ -149,3 +149,4 @@ def test_a_bootstrap_p_value_is_the_level_at_which_the_interval_reaches_zero():
     found = Draws(1.0, values, Resampling(1000))
     assert found.p_value() == pytest.approx(0.06)
     assert found.interval(0.95).low < 0 < found.interval(0.90).low
+    assert Draws(1.0, np.ones(4000), Resampling(4000)).p_value() == 1 / 4000  # no resample at 0: the least it can show

@@ -151,11 +151,13 @@ class Draws:
 
     def p_value(self) -> float:
         """Twice the smaller share of resamples on either side of 0 (at most 1): the smallest
-        1 - level at which the percentile interval excludes 0."""
+        1 - level at which the percentile interval excludes 0; at least 1 / resamples, the least
+        the resamples can show (0 of them on one side is not p = 0)."""
         values = self.values[np.isfinite(self.values)]
         if not len(values):
             return float("nan")
-        return float(min(1.0, 2.0 * min(np.mean(values <= 0.0), np.mean(values >= 0.0))))
+        share = min(np.mean(values <= 0.0), np.mean(values >= 0.0))
+        return float(min(1.0, max(2.0 * share, 1.0 / len(values))))
 
 
 def score_draws(sums: np.ndarray, score: Score, resampling: Resampling, worlds: Sequence[Hashable] | None = None) -> Draws:
