@@ -138,7 +138,7 @@ def _primary_row(v: Verdict, entry: dict) -> str:
     section, _, key = v.compare.partition("/")
     a, _, b = key.replace("_postprocessed_vs_raw", "-postprocessed_vs_raw").partition("_vs_")
     if v.interval is None:
-        return f"| {v.name} | {v.claim} | {a} vs {b} | not measured | | no difference measured |"
+        return f"| {v.name} | {v.claim} | {a} vs {b} | not measured | | not measured |"
     i = v.interval
     if v.null == 1.0:  # a rate ratio, a over b
         shown = f"ratio {i.estimate:.2f} [{i.low:.2f}, {i.high:.2f}]"
@@ -240,8 +240,8 @@ def _conditions(evaluation: dict, runs: list[str]) -> list[str]:
     scratch = [r for r in runs if split_run_name(r)[1] == "none"]
     titles = {key: title for key, title, _ in GROUPS}
     lines = [
-        "By condition of the next 20 m of driving (raw maps, networks without pretraining; IoU [95 % interval] over the blocks "
-        "that hold the group's frames):\n",
+        "By condition of the next 20 m of driving (raw maps, networks without pretraining; IoU [95 % hierarchical interval: the "
+        "test worlds and blocks that hold the group's frames, and the seeds]; exploratory):\n",
         "| condition | test images | test sequences | " + " | ".join(method_title(r) for r in scratch) + " | mean path prior |",
         "|" + " --- |" * (4 + len(scratch)),
     ]
@@ -263,13 +263,13 @@ def _against_prior(c: dict, runs: list[str], key: str, title: str) -> list[str]:
     below = [run for run, (_, _, high) in gaps.items() if high < 0]
     above = [run for run, (_, low, _) in gaps.items() if low > 0]
     ious = [row[run] for run in gaps]
-    verdict = (
-        f"{len(below)} of {len(gaps)} networks score below it and {len(above)} above it (paired intervals excluding 0), "
-        f"the rest: no difference measured"
+    same = len(gaps) - len(below) - len(above)
+    verdict = f"{len(below)} of {len(gaps)} networks score below it and {len(above)} above it (paired intervals excluding 0)" + (
+        f"; no difference measured for {same}" if same else ""
     )
     spread = ", ".join(f"{method_title(run)} {g[0]:+.3f} [{g[1]:+.3f}, {g[2]:+.3f}]" for run, g in gaps.items())
     return [
-        f"Exploratory, {title} ({row['frames']} test images from {row.get('sequences', 'n/a')} sequences): the networks score IoU "
+        f"Exploratory: {title}, {row['frames']} test images from {row.get('sequences', 'n/a')} sequences. The networks score IoU "
         f"{min(ious):.3f} to {max(ious):.3f} against the mean path prior's {row['mean_path_prior']:.3f}; {verdict}. Network minus "
         f"prior: {spread}.\n"
     ]
