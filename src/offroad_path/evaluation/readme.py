@@ -148,7 +148,8 @@ def _primary_row(v: Verdict, entry: dict) -> str:
         shown = f"{i.estimate:+.3f} [{i.low:+.3f}, {i.high:+.3f}]"
     quantity = QUANTITY.get(section, "interventions per km")
     verdict = f"{a}'s {quantity} {v.direction}" if v.direction else "no difference measured"
-    return f"| {v.name} | {v.claim} | {a} vs {b} | {shown} at {100 * v.level:.2f} % | {v.p_value:.4f} | {verdict} |"
+    p = f"{v.p_value:.4f}" if v.p_value >= 1e-4 else "< 0.0001"
+    return f"| {v.name} | {v.claim} | {a} vs {b} | {shown} at {100 * v.level:.2f} % | {p} | {verdict} |"
 
 
 def misstated(readme: str) -> list[str]:
