@@ -86,7 +86,8 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     paired = {f"{r}_vs_pilotnet" for r in runs}  # each with its paired interval
     assert set(metrics["steering_from_paths"]) == runs | paired | {"straight_ahead", "pilotnet", "label_ceiling"}
     scored = runs | {"mean_path_prior"}
-    assert set(metrics["by_condition"]["all"]) == scored | {f"{r}.interval" for r in scored} | {"frames", "sequences"}
+    against_prior = {f"{r}.minus_prior" for r in runs}  # each network minus the prior, paired
+    assert set(metrics["by_condition"]["all"]) == scored | {f"{r}.interval" for r in scored} | against_prior | {"frames", "sequences"}
     assert len((repo_copy / "data" / "evaluation" / "results.csv").read_text().splitlines()) == 1 + 2 * 2 * len(GRID)
     assert len(list((repo_copy / "metrics" / "precision_recall").glob("*.csv"))) == 2 * len(GRID)
     assert {p.name for p in (repo_copy / "data" / "evaluation" / "figures").iterdir()} == {"good_and_bad_cases.png", "postprocessing.png"}

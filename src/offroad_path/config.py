@@ -425,7 +425,7 @@ class ConclusionsConfig:
 
     alpha: float = setting(between(0, 1, low_open=True, high_open=True))  # family-wise, two-sided
     power: float = setting(between(0, 1, low_open=True, high_open=True))  # the drive's target power per primary
-    primaries: dict[str, PrimaryConfig] = field(default_factory=dict)
+    primaries: dict[str, PrimaryConfig] = MISSING
 
 
 @dataclass

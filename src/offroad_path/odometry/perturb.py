@@ -1,7 +1,7 @@
 """Poses with a controlled odometry error, for measuring how much of it the labels tolerate
 (benchmarks/label_noise.py). The study asks what an odometry worse than this project's windowed VO
 (0.3 to 1.1 % drift over 20 m segments on its world) costs; the paper reports no drift figure for
-its libviso2 (Geiger et al. report about 2 % for it on KITTI).
+its libviso2 (about 2 % is a KITTI benchmark figure, not the paper's).
 
 Each step's true relative motion keeps its rotation; its length is scaled by 1 + s and the heading
 turned by w metres-of-travel times a rate, where s and the rate are smooth random processes over the
