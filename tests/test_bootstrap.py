@@ -30,8 +30,9 @@ def test_two_blocks_by_hand():
     np.testing.assert_array_equal(sums, [A, B])
     # A resample of two blocks is AA (IoU 0.6), AB or BA (150 / 200 = 0.75) or BB (0.9); with 1000
     # draws of seed 0, AA and BB each hold far more than the 2.5 % in each tail.
-    drawn = Resampling(1000, seed=0).indices(2)
-    aa, bb = int((drawn.sum(axis=1) == 0).sum()), int((drawn.sum(axis=1) == 2).sum())
+    drawn, _ = Resampling(1000, seed=0).weights([0, 1])  # each block its own world: a flat draw
+    np.testing.assert_array_equal(drawn.sum(axis=1), 2)
+    aa, bb = int((drawn[:, 0] == 2).sum()), int((drawn[:, 1] == 2).sum())
     assert aa > 25 and bb > 25
     assert interval(sums, iou, Resampling(1000, seed=0)) == Interval(0.75, 0.6, 0.9)
 

@@ -21,7 +21,7 @@ import numpy as np
 from offroad_path.driving.counts import compare_rates, power_sentence, route_needed
 from offroad_path.driving.loop import DriveLog
 from offroad_path.evaluation.bootstrap import Interval, Resampling, drawn, paired_draws, whole
-from offroad_path.evaluation.primaries import holm_levels, owned, recorded
+from offroad_path.evaluation.primaries import check_declared, holm_levels, owned, recorded
 
 ARGUMENTS = {
     "steering": "(a) closed loop: does predicting the path drive better than predicting the steering?",
@@ -246,7 +246,5 @@ def _primary_text(name: str, conclusions, entry: dict) -> str:
 def check_arguments_primaries(conclusions, d) -> list[str]:
     """Before any drive: the primaries are well formed; returns those naming an argument that this
     drive does not answer (its policies not driven), which are not measured."""
-    from offroad_path.evaluation.primaries import check_declared
-
     available = {argument: {f"{a}_vs_{b}" for a in names for b in names if a != b} for argument, names in d.arguments.items()}
     return check_declared(conclusions.primaries, {a: available.get(a, set()) for a in ARGUMENTS})

@@ -89,13 +89,6 @@ class Resampling:
     seed: int = 0
     level: float = LEVEL
 
-    def indices(self, n_blocks: int) -> np.ndarray:
-        """(count, n_blocks) block indices drawn with replacement, one resample per row: a flat draw
-        of independent units (the drive's drives within a world, tests)."""
-        if n_blocks < 2:
-            raise ValueError(f"a block bootstrap needs at least 2 blocks, has {n_blocks}")
-        return np.random.default_rng(self.seed).integers(0, n_blocks, (self.count, n_blocks))
-
     def weights(self, worlds: Sequence[Hashable], seeds: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """The hierarchical draw: (count, B) how often each block is drawn (worlds, then blocks within
         each drawn world) and (count, S) how often each seed is; `worlds`: each block's world."""
