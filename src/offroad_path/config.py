@@ -93,6 +93,30 @@ class SlipConfig:
     noise: float = setting(at_least(0))  # per-step (per-frame) noise of the factor, a standard deviation
 
 
+def _valid_looks(combinations: Any) -> bool:
+    from offroad_path.world.appearance import axis_values  # numpy only
+
+    axes = axis_values()
+    return all(c and all(axes.get(k) and v in axes[k] for k, v in c.items()) for c in combinations)
+
+
+LOOKS = {
+    "rule": Rule(
+        _valid_looks,
+        "must list combinations such as {track: mud, season: autumn} of the axes track, season, light, vegetation",
+    )
+}
+
+
+@dataclass
+class AppearanceConfig:
+    """Each world's look drawn from a stream of its own (offroad_path.world.appearance)."""
+
+    enabled: bool = MISSING  # false: the single look of the worlds before issue 44, byte for byte
+    # Looks no training drive shows; every other test world is drawn from them (the held-out-appearance test set).
+    held_out: list[dict[str, str]] = setting(LOOKS)
+
+
 @dataclass
 class WorldConfig:
     """One rendered sequence's generator settings; per-sequence variation is drawn around these."""
@@ -121,6 +145,7 @@ class WorldConfig:
     sun_elevation_deg: tuple[float, float] = MISSING
     density_jitter: float = MISSING  # per-sequence density factor drawn in [1 - j, 1 + j]
     slip: SlipConfig = field(default_factory=SlipConfig)
+    appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
 
 
 @dataclass
@@ -443,6 +468,7 @@ class EvaluateConfig:
     bootstrap: BootstrapConfig = field(default_factory=BootstrapConfig)
     conclusions: ConclusionsConfig = field(default_factory=ConclusionsConfig)
     real_labels_dir: str | None = MISSING  # a label run of real footage: every network scored on it too (null: none)
+    colour_baseline_pixels: int = setting(at_least(0))  # training pixels per frame of the colour baseline (0: none)
     threshold: float = setting(between(0, 1))  # path where C > threshold
     pr_thresholds: int = setting(at_least(2))
     out_dir: str = MISSING  # results table, figures

@@ -55,6 +55,7 @@ def outputs(cfg: DictConfig) -> Outputs:
 @reads("evaluate", "label", "split", "mlflow", writes=outputs)
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
     # The work's modules (torch among them) once the config and outputs are checked: a refusal is fast.
+    from offroad_path.evaluation.looks import HeldOutLooks
     from offroad_path.evaluation.report import TestSet, write_report
     from offroad_path.evaluation.sections import (
         Baselines,
@@ -81,6 +82,7 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
         steering,
         PrimaryQuestions(evaluate_cfg, uncertainty, steering),
         ByCondition(bootstrap),
+        HeldOutLooks(bootstrap),
         Temporal(evaluate_cfg, cfg.label, cfg.split.block_m),
         RealFootage(evaluate_cfg, bootstrap, cfg.split.block_m, cfg.label.distance_m),
     ]

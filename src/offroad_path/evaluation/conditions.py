@@ -17,7 +17,7 @@ from offroad_path.evaluation.bootstrap import Interval
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.scores import iou as iou_score
 from offroad_path.evaluation.tables import fmt
-from offroad_path.world.groups import GROUPS
+from offroad_path.world.groups import GROUPS, OLD_LOOK
 
 if TYPE_CHECKING:
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
@@ -32,7 +32,7 @@ def parse_row(row: dict[str, str]) -> dict:
         "fork": parse_boolean(row["fork"]),
         "surface": row["surface"],
         "bend_radius_m": float(row["bend_radius_m"]),
-    }
+    } | {k: row.get(k) or v for k, v in OLD_LOOK.items()}  # rendered before world.appearance: the old look
 
 
 def read_conditions(samples: list[Sample]) -> list[dict] | None:

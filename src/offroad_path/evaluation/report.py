@@ -44,6 +44,7 @@ class TestSet:
     curves: dict[str, dict[str, np.ndarray]]  # run -> precision-recall curve of its first seed's raw maps
     prior: np.ndarray  # (H, W) bool: the mean training label above the threshold
     threshold: float  # path where confidence > threshold (evaluate.threshold)
+    colour: np.ndarray | None = None  # (N, H, W) float32: the colour baseline's path probability (evaluation.colour); None: off
 
     @classmethod
     def read(cls, e: DictConfig) -> TestSet:
@@ -80,10 +81,24 @@ class TestSet:
                         if pp == "no":
                             predicted[run] = seed_predicted[run][0]
                             curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
-        prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
+        train = read_manifest(e.train_manifest)
+        prior = mean_path(load_labels(train)) > e.threshold
+        colour = _colour_maps(e, train, samples, labels.shape[1:])
         summed = {key: np.sum(seeds, axis=0) for key, seeds in per_seed.items()}
         return cls(
-            list(e.runs), list(e.seeds), samples, labels, paths, summed, per_seed, predicted, seed_predicted, curves, prior, e.threshold
+            list(e.runs),
+            list(e.seeds),
+            samples,
+            labels,
+            paths,
+            summed,
+            per_seed,
+            predicted,
+            seed_predicted,
+            curves,
+            prior,
+            e.threshold,
+            colour,
         )
 
     def checkpoint(self, runs_dir: str | Path, run: str) -> Path:
@@ -94,6 +109,20 @@ class TestSet:
     def prior_counts(self) -> np.ndarray:
         """(N, 4) per-image counts of the mean path prior painted on every test frame (baselines, conditions)."""
         return counts(np.broadcast_to(self.prior, self.labels.shape).astype(np.float32), self.labels, self.threshold)
+
+    @functools.cached_property
+    def colour_counts(self) -> np.ndarray | None:
+        """(N, 4) per-image counts of the colour baseline (None when evaluate.colour_baseline_pixels is 0)."""
+        return None if self.colour is None else counts(self.colour, self.labels, self.threshold)
+
+
+def _colour_maps(e: DictConfig, train: list[Sample], test: list[Sample], shape: tuple[int, int]) -> np.ndarray | None:
+    """The colour baseline's path probabilities on the test frames, fitted on the training frames (None when off)."""
+    if not e.colour_baseline_pixels:
+        return None
+    from offroad_path.evaluation.colour import ColourBaseline  # scikit-learn: only when asked for
+
+    return ColourBaseline(e.colour_baseline_pixels, e.bootstrap.seed).fit(train).predict(test, shape)
 
 
 class Section(Protocol):

@@ -119,12 +119,16 @@ class Baselines:
             else:
                 self.scores[f"non_corresponding.{run}"] = non_corresponding(test.predicted[run], test.labels, groups)
         self.scores["mean_path_prior"] = pooled(test.prior_counts)
+        if test.colour_counts is not None:
+            self.scores["colour_classifier"] = pooled(test.colour_counts)
 
     def markdown(self) -> str:
         rows = [BaselineRow(baseline_name(key), s.accuracy, s.recall, s.precision, s.iou) for key, s in self.scores.items()]
         return (
             "\n## Baselines\n\nNon-corresponding: each prediction against every other test frame's ground truth, "
-            "averaged over those pairs (paper: accuracy 0.84, IoU 0.41).\n\n" + markdown_table(rows)
+            "averaged over those pairs (paper: accuracy 0.84, IoU 0.41). Colour classifier: gradient-boosted trees on each "
+            "pixel's RGB, HSV, row and column alone, trained on the training split (offroad_path.evaluation.colour).\n\n"
+            + markdown_table(rows)
         )
 
     def metrics(self) -> dict:
@@ -202,6 +206,9 @@ class ByCondition:
             return
         per_image = {method_title(run): np.stack(test.seed_counts[run, "no"]) for run in test.runs} | {"mean path prior": test.prior_counts}
         self.keys = {method_title(run): run for run in test.runs} | {"mean path prior": "mean_path_prior"}
+        if test.colour_counts is not None:
+            per_image["colour classifier"] = test.colour_counts
+            self.keys["colour classifier"] = "colour_classifier"
         self.table = by_condition(conditions, per_image, self.bootstrap, [s.sequence for s in test.samples], "mean path prior")
 
     def markdown(self) -> str:

@@ -61,7 +61,10 @@ def baseline_name(key: str) -> str:
     """'non_corresponding.unet-none' -> 'U-Net (none) against non-corresponding ground truth'."""
     if key.startswith("non_corresponding."):
         return f"{method_title(key.removeprefix('non_corresponding.'))} against non-corresponding ground truth"
-    return {"mean_path_prior": "mean path prior (average training label)"}.get(key, key)
+    return {
+        "mean_path_prior": "mean path prior (average training label)",
+        "colour_classifier": "colour classifier (RGB, HSV, row, column)",
+    }.get(key, key)
 
 
 def fmt(x: float | int | str) -> str:

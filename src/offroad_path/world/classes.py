@@ -1,5 +1,7 @@
 """The eight semantic classes of the off-road world, in the order of their ids."""
 
+import numpy as np
+
 CLASS_NAMES: tuple[str, ...] = ("sky", "water", "dirt", "paved_road", "grass", "foliage", "tree", "man_made_obstacle")
 
 SKY, WATER, DIRT, PAVED, GRASS, FOLIAGE, TREE, OBSTACLE = range(len(CLASS_NAMES))
@@ -14,3 +16,4 @@ BASE_COLORS: dict[int, tuple[float, float, float]] = {  # linear RGB albedo befo
     OBSTACLE: (0.55, 0.50, 0.45),
 }
 TRUNK_COLOR = (0.28, 0.20, 0.13)
+TEXTURE_CONTRAST = np.array([0.0, 0.05, 0.45, 0.15, 0.5, 0.5, 0.4, 0.2])  # per class: the detail texture's strength

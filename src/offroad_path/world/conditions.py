@@ -10,7 +10,11 @@ the rendered world knows each exactly, so every frame gets one row of `condition
   30 m ahead (hills and trees that hide it are not checked);
 - surface: what the corridor's centre line mostly drives on: paved, dirt or grass (grass: off
   the track, on a detour), or mixed when no class covers half of it;
-- bend_radius_m: the drive's radius over the corridor, 1 / mean |curvature|.
+- bend_radius_m: the drive's radius over the corridor, 1 / mean |curvature|;
+- track, light, look, canopy: the world's appearance (offroad_path.world.appearance), the same on
+  every frame: the track's surface, the light, "held_out" for a combination no training drive
+  shows ("seen" otherwise), "tree_lined" where trees along the track dapple it ("open" otherwise).
+  A world without one (world.appearance.enabled false) is the old look: dirt, clear, seen, open.
 """
 
 from __future__ import annotations
@@ -19,11 +23,12 @@ import numpy as np
 
 from offroad_path.config import WorldConfig
 from offroad_path.world.classes import DIRT, GRASS, PAVED, WATER
+from offroad_path.world.groups import OLD_LOOK
 from offroad_path.world.kernels import matmul, rigid_inverse, sample_bilinear
 from offroad_path.world.scene import World
 from offroad_path.world.trajectory import ARC_STEP_M
 
-COLUMNS = ("frame", "shadow", "water", "fork", "surface", "bend_radius_m")
+COLUMNS = ("frame", "shadow", "water", "fork", "surface", "bend_radius_m", "track", "light", "look", "canopy")
 SURFACES = {PAVED: "paved", DIRT: "dirt", GRASS: "grass"}
 STRAIGHT_RADIUS_M = 10_000.0  # the radius written for a straight drive
 FORK_RANGE_M = (3.0, 30.0)
@@ -34,6 +39,7 @@ def frame_conditions(world: World, cfg: WorldConfig, distance_m: float = 20.0, n
     half = cfg.vehicle.width_m / 2
     tan_half_fov = np.tan(np.deg2rad(cfg.hfov_deg) / 2)
     fork_points = _fork_points(world)
+    look = OLD_LOOK if world.look is None else world.look.tags() | {"canopy": "tree_lined" if world.look.tree_lined else "open"}
     rows = []
     for k, s0 in enumerate(world.frame_s):
         s = s0 + np.arange(0.0, distance_m + 1e-9, 0.25)
@@ -58,6 +64,7 @@ def frame_conditions(world: World, cfg: WorldConfig, distance_m: float = 20.0, n
                 "surface": surface,
                 "bend_radius_m": round(radius, 2),
             }
+            | look
         )
     return rows
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+OLD_LOOK = {"track": "dirt", "light": "clear", "look": "seen", "canopy": "open"}  # a world rendered without world.appearance
 SHADOW_FRACTION = 0.1  # of the corridor, for "shadow on the path"
 # The report's condition groups, (key, title, test on one frame's row): a frame may be in several.
 GROUPS: list[tuple[str, str, Callable[[dict], bool]]] = [
@@ -19,4 +20,12 @@ GROUPS: list[tuple[str, str, Callable[[dict], bool]]] = [
     ("sharp_bend", "bend radius below 20 m", lambda r: r["bend_radius_m"] < 20),
     ("bend", "bend radius 20 to 30 m", lambda r: 20 <= r["bend_radius_m"] < 30),
     ("gentle", "bend radius 30 m or more", lambda r: r["bend_radius_m"] >= 30),
+    # The looks of world.appearance: the paper's poor case (shadow and water together), and the tracks
+    # real driving has that a colour tells nothing about.
+    ("shadow_water", "shadow and water on the path", lambda r: r["shadow"] >= SHADOW_FRACTION and r["water"]),
+    ("dappled", "dappled shade under trees along the track", lambda r: r["shadow"] >= SHADOW_FRACTION and r["canopy"] == "tree_lined"),
+    ("grass_track", "a track of the grass's own colour (worn only)", lambda r: r["track"] == "grass_track"),
+    ("no_track", "open ground, no visible track", lambda r: r["track"] == "none"),
+    ("seen_look", "a look the training drives show", lambda r: r["look"] == "seen"),
+    ("held_out_look", "a look no training drive shows (world.appearance.held_out)", lambda r: r["look"] == "held_out"),
 ]

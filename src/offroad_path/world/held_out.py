@@ -8,6 +8,9 @@ of the report (`per_condition`, offroad_path.world.conditions.GROUPS). What a wo
 known before rendering (frame_conditions reads the world, not the images), so only kept worlds are
 rendered. Choosing by condition favours worlds with rare conditions: the test set is built to
 measure every group, not to mirror their frequency in the training drives.
+
+Every other candidate (odd index) is drawn with a held-out look (world.appearance.held_out, which no
+training drive shows): the report compares those worlds with the others, the in-distribution ones.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ class HeldOutWorld:
     seed: int
     blocks: int  # blocks of labelled driving
     groups: tuple[str, ...]  # condition groups it shows
+    held_out_look: bool = False  # drawn with one of world.appearance.held_out's looks
 
     @property
     def name(self) -> str:
@@ -44,10 +48,24 @@ def held_out_seed(master_seed: int, index: int) -> int:
     return int(np.random.SeedSequence([master_seed, index], spawn_key=(TEST_STREAM,)).generate_state(1)[0])
 
 
-def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig) -> tuple[int, tuple[str, ...]]:
+def held_out_look(cfg: WorldConfig, index: int) -> bool:
+    """Whether test candidate `index` is drawn with a held-out look: every other one, when there are such looks."""
+    return bool(cfg.appearance.enabled and cfg.appearance.held_out and index % 2 == 1)
+
+
+def required_groups(cfg: WorldConfig) -> list[str]:
+    """The condition groups the test set must show: the looks' groups only where the world draws looks."""
+    looks = {"shadow_water", "dappled", "grass_track", "no_track", "seen_look", "held_out_look"}
+    skip = set() if cfg.appearance.enabled else looks
+    if not (cfg.appearance.enabled and cfg.appearance.held_out):
+        skip.add("held_out_look")
+    return [key for key, _, _ in GROUPS if key not in skip]
+
+
+def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig, look_held_out: bool = False) -> tuple[int, tuple[str, ...]]:
     """(blocks of labelled driving, condition groups shown) of the world drawn from `seed`: frames
     with `horizon_m` of drive ahead get labels; blocks start every `block_m` along the drive."""
-    world = build_world(cfg, seed)
+    world = build_world(cfg, seed, look_held_out)
     s = np.asarray(world.frame_s) - world.frame_s[0]
     labelled = s <= s[-1] - c.horizon_m
     rows = [row for row, keep in zip(frame_conditions(world, cfg), labelled, strict=True) if keep]
@@ -58,7 +76,8 @@ def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig) -> tuple[int, tuple
 
 def _survey_job(args: tuple[WorldConfig, int, int, TestWorldsConfig]) -> HeldOutWorld:
     cfg, index, seed, c = args
-    return HeldOutWorld(index, seed, *survey(cfg, seed, c))
+    look = held_out_look(cfg, index)
+    return HeldOutWorld(index, seed, *survey(cfg, seed, c, look), held_out_look=look)
 
 
 def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, workers: int = 0) -> list[HeldOutWorld]:
@@ -67,7 +86,7 @@ def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: i
     if c.min_blocks == 0:
         return []
     chosen: list[HeldOutWorld] = []
-    shown = dict.fromkeys((key for key, _, _ in GROUPS), 0)
+    shown = dict.fromkeys(required_groups(cfg), 0)
     batch = max(1, workers or 2)
     for start in range(0, c.max_candidates, batch):
         indices = range(start, min(start + batch, c.max_candidates))
@@ -77,7 +96,7 @@ def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: i
             short = sum(w.blocks for w in chosen) < c.min_blocks
             if (lacking and set(world.groups) & set(lacking)) or (not lacking and short):
                 chosen.append(world)
-                for key in world.groups:
+                for key in set(world.groups) & shown.keys():
                     shown[key] += 1
             if not _lacks(chosen, shown, c):
                 log.info("test worlds: kept %d of %d drawn, %d blocks", len(chosen), world.index + 1, sum(w.blocks for w in chosen))

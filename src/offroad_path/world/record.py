@@ -49,10 +49,11 @@ def encode_depth(depth_m: np.ndarray) -> np.ndarray:
     return np.where(depth_m > 0, mm, 0).astype(np.uint16)
 
 
-def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool = False) -> dict:
+def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool = False, look_held_out: bool = False) -> dict:
     """Render one sequence into out_dir; returns a summary (frames, distance, class pixel counts).
-    held_out: a test world (meta.json's "split": "test"), which the split stage keeps for testing."""
-    world = build_world(cfg, seed)
+    held_out: a test world (meta.json's "split": "test"), which the split stage keeps for testing;
+    look_held_out: drawn with one of world.appearance.held_out's looks."""
+    world = build_world(cfg, seed, look_held_out)
     camera = camera_for(cfg)
     rays = camera.rays()
     baseline = cfg.rig.baseline_m
@@ -62,10 +63,11 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
     for sub in ("image_l", "image_r", "depth", "semantic"):
         (out_dir / sub).mkdir(parents=True)
     class_pixels = np.zeros(len(CLASS_NAMES), np.int64)
+    shutter_m = _shutter_metres(world, cfg.fps)
     for k, pose in enumerate(world.poses):
         name = f"{k:06d}.png"
-        left = render_view(world, camera, pose, cfg.max_distance_m, rays)
-        right = render_view(world, camera, matmul(pose, to_right), cfg.max_distance_m, rays)
+        left = render_view(world, camera, pose, cfg.max_distance_m, rays, shutter_m[k], (seed, k, 0))
+        right = render_view(world, camera, matmul(pose, to_right), cfg.max_distance_m, rays, shutter_m[k], (seed, k, 1))
         write_image(out_dir / "image_l" / name, left.image[:, :, ::-1], FAST_PNG)
         write_image(out_dir / "image_r" / name, right.image[:, :, ::-1], FAST_PNG)
         write_image(out_dir / "depth" / name, encode_depth(left.depth), FAST_PNG)
@@ -106,7 +108,9 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         "distance_m": distance,
         "frames": len(world.poses),
         "world": world_settings(cfg),  # the drive stage and the slip targets rebuild the world from these and the seed
-    } | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {})
+    }
+    if world.look is not None:  # only then: a world without a look keeps its meta.json byte for byte
+        meta["appearance"] = asdict(world.look) | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {})
     if world.slip is not None:  # only then: a world without slip keeps today's meta.json byte for byte
         meta["steering"] = (
             "the driver's input under slip (world.slip): bicycle-model wheel angle of the true curvature "
@@ -118,17 +122,25 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
     return summary | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {}) | {"class_pixels": class_pixels.tolist()}
 
 
-def _record_job(args: tuple[WorldConfig, int, str, bool]) -> dict:
+def _shutter_metres(world: World, fps: float) -> np.ndarray:
+    """Metres driven while each frame's shutter is open (its speed from the frame spacing), 0 without a look."""
+    if world.look is None:
+        return np.zeros(len(world.frame_s))
+    speed = np.gradient(world.frame_s) * fps
+    return speed * world.look.sensor.shutter_s
+
+
+def _record_job(args: tuple[WorldConfig, int, str, bool, bool]) -> dict:
     cv2.setNumThreads(1)  # one process per core: no nested threading
-    cfg, seed, out_dir, held_out = args
-    return record_sequence(cfg, seed, Path(out_dir), held_out)
+    cfg, seed, out_dir, held_out, look_held_out = args
+    return record_sequence(cfg, seed, Path(out_dir), held_out, look_held_out)
 
 
-def record_sequences(cfg: WorldConfig, drives: list[tuple[str, int, bool]], out_dir: Path, workers: int = 0) -> list[dict]:
-    """Render each drive (name, seed, held out) into out_dir/<name> in parallel, one process per worker."""
-    jobs = [(cfg, seed, str(out_dir / name), held_out) for name, seed, held_out in drives]
+def record_sequences(cfg: WorldConfig, drives: list[tuple], out_dir: Path, workers: int = 0) -> list[dict]:
+    """Render each drive (name, seed, held out[, held-out look]) into out_dir/<name> in parallel, one process per worker."""
+    jobs = [(cfg, drive[1], str(out_dir / drive[0]), drive[2], drive[3] if len(drive) > 3 else False) for drive in drives]
     start = time.perf_counter()
-    summaries = map_processes(_record_job, jobs, workers, [f"sequence {name}" for name, _, _ in drives])
+    summaries = map_processes(_record_job, jobs, workers, [f"sequence {drive[0]}" for drive in drives])
     elapsed = time.perf_counter() - start
     frames = sum(s["frames"] for s in summaries)
     log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", len(drives), frames, elapsed, frames / elapsed)
@@ -169,7 +181,7 @@ def rebuild_world(cfg: WorldConfig, folder: Path) -> World:
     with `cfg`; a ValueError naming the folder when cfg is not the config it was rendered with."""
     meta = json.loads((folder / "meta.json").read_text())
     check_rendered_with(cfg, folder / "meta.json", meta)
-    world = build_world(cfg, int(meta["seed"]))
+    world = build_world(cfg, int(meta["seed"]), bool(meta.get("appearance", {}).get("held_out", False)))
     if not math.isclose(path_length(world.poses), float(meta["distance_m"]), rel_tol=1e-9):
         raise ValueError(
             f"{folder}: rendered with another world config than this one (its drive is {meta['distance_m']:.3f} m, "

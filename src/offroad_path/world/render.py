@@ -14,10 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offroad_path.world.classes import SKY, WATER
+from offroad_path.world.classes import SKY, TEXTURE_CONTRAST, WATER
 from offroad_path.world.kernels import dot_rows, matmul, norm_rows, sample_bilinear
 from offroad_path.world.objects import intersect
 from offroad_path.world.scene import World
+from offroad_path.world.sensor import expose, record
 from offroad_path.world.terrain import Terrain
 
 NEAR_M = 0.3
@@ -25,10 +26,8 @@ RELAX = 0.02  # march step at least 2 % of the distance: thinner distant bumps t
 MIN_STEP_M = 0.02
 BISECTIONS = 4
 REFINEMENTS = 8
-FOG_DISTANCE_M = 220.0
 # Linear light to 8-bit sRGB-like gamma 2.2; a table is much faster than a power per channel.
 GAMMA = np.clip(255.0 * np.linspace(0.0, 1.0, 16384) ** (1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
-TEXTURE_CONTRAST = np.array([0.0, 0.05, 0.45, 0.15, 0.5, 0.5, 0.4, 0.2])  # per class
 
 
 @dataclass(frozen=True)
@@ -232,8 +231,17 @@ def trace_objects(world: World, shot: Shot, t_bound: np.ndarray, max_t: float):
     return t_best, normal, index
 
 
-def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: float, cam_rays: np.ndarray | None = None) -> View:
-    """Render one camera with camera-to-world `pose` (4x4)."""
+def render_view(  # noqa: PLR0913, PLR0915, PLR0917 (the renderer's one entry point, read top to bottom)
+    world: World,
+    camera: PinholeCamera,
+    pose: np.ndarray,
+    max_t: float,
+    cam_rays: np.ndarray | None = None,
+    motion_m: float = 0.0,
+    noise_key: tuple[int, ...] = (0,),
+) -> View:
+    """Render one camera with camera-to-world `pose` (4x4). A world with a look (world.appearance) goes
+    through its sensor: motion_m metres driven while the shutter is open, noise drawn from noise_key."""
     rays = camera.rays() if cam_rays is None else cam_rays
     dirs = matmul(rays, pose[:3, :3].T)  # (M, 3) world directions, t = depth
     origin = pose[:3, 3]
@@ -253,7 +261,7 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     normal = np.empty((len(lit), 3))
     row, col = world.material_grid.nearest(points[g, 0], points[g, 2])
     cls[g] = world.materials[row, col]
-    albedo[g] = world.palette[cls[g]]
+    albedo[g] = _ground_albedo(world, cls[g], row, col)
     normal[g] = world.terrain.normals(points[g, 0], points[g, 2])
     objects = world.objects.arrays()
     which = obj_index[lit[o]]
@@ -270,13 +278,18 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     detail = _detail(world, points, cls, footprint, ground)
     sun_vis = np.ones(len(lit))
     sun_vis[g] = sample_bilinear(world.shadow, *world.material_grid.coords(points[g, 0], points[g, 2]))
-    sun = np.maximum(matmul(normal, world.sky.sun), 0.0) * sun_vis
-    colour = albedo * detail * (0.35 * world.sky.zenith + 0.9 * sun[:, None])
+    if "dapple" in world.textures:  # sun through gaps in the crowns
+        gaps = sample_bilinear(world.textures["dapple"], *(np.mod(points[g][:, [0, 2]] / 0.05, 512).astype(np.float32).T), wrap=True)
+        sun_vis[g] = 1 - (1 - sun_vis[g]) * (1 - gaps)
+    sky = world.sky
+    sun = np.maximum(matmul(normal, sky.sun), 0.0) * sun_vis
+    direct = sky.sun_strength * sun[:, None] if sky.sun_colour is None else sky.sun_strength * sun[:, None] * sky.sun_colour
+    colour = albedo * detail * (sky.ambient * sky.zenith + direct)
     water = np.flatnonzero(cls == WATER)
     if len(water):
         reflected = unit[water] * np.array([1.0, -1.0, 1.0])
         colour[water] = 0.45 * colour[water] + 0.55 * _sky_colour(world, reflected) * (0.4 + 0.6 * sun_vis[water, None])
-    fog = 1.0 - np.exp(-t_lit * distance / FOG_DISTANCE_M)
+    fog = 1.0 - np.exp(-t_lit * distance / sky.fog_m)
     rgb = np.empty((len(dirs), 3))
     rgb[lit] = colour * (1 - fog[:, None]) + world.sky.horizon * fog[:, None]
     sky = np.flatnonzero(~hit)
@@ -284,7 +297,28 @@ def render_view(world: World, camera: PinholeCamera, pose: np.ndarray, max_t: fl
     rgb[sky] = _sky_colour(world, sky_dirs / norm_rows(sky_dirs)[:, None])
 
     shape = (camera.height, camera.width)
-    return View(image=_gamma_encode(rgb).reshape(*shape, 3), depth=t.reshape(shape), semantic=semantic.reshape(shape))
+    depth = t.reshape(shape)
+    return View(image=_film(world, rgb.reshape(*shape, 3), depth, motion_m, noise_key), depth=depth, semantic=semantic.reshape(shape))
+
+
+def _ground_albedo(world: World, cls: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+    """(N, 3) albedo of ground points of classes `cls` at material cells (row, col): the palette's, with
+    the track's ruts blended in where it is worn."""
+    albedo = world.palette[cls]
+    if world.wear is not None:
+        worn = world.wear[row, col].astype(np.float64)[:, None] * (world.rut_strength / 255.0)
+        albedo = albedo * (1 - worn) + world.rut_colour * worn
+    return albedo
+
+
+def _film(world: World, linear: np.ndarray, depth: np.ndarray, motion_m: float, noise_key: tuple[int, ...]) -> np.ndarray:
+    """Linear light (H, W, 3) to the 8-bit image: gamma alone without a look, else through its sensor."""
+    shape = linear.shape
+    if world.look is None:
+        return _gamma_encode(linear.reshape(-1, 3)).reshape(shape)
+    sensor = world.look.sensor
+    exposed = expose(linear, depth, sensor, motion_m).reshape(-1, 3)
+    return record(_gamma_encode(exposed).reshape(shape), sensor, noise_key)
 
 
 def _gamma_encode(rgb: np.ndarray) -> np.ndarray:
@@ -311,7 +345,7 @@ def _detail(world: World, points: np.ndarray, cls: np.ndarray, footprint: np.nda
     fine = mips[0] * (1 - w1) + mips[1] * (w1 - w2) + mips[2] * w2
     fine *= np.clip(1.2 - footprint / 0.4, 0.3, 1.0)
     coarse = sample_bilinear(tex["coarse"], np.mod(a / 0.08, 512).astype(np.float32), np.mod(b / 0.08, 512).astype(np.float32), wrap=True)
-    contrast = TEXTURE_CONTRAST[cls]
+    contrast = (TEXTURE_CONTRAST if world.contrast is None else world.contrast)[cls]
     gain = 1.0 + contrast * (0.5 * fine + 0.35 * coarse)
     # Coarse patches also shift hue a little (dry grass, wet dirt).
     hue = np.stack([1 + 0.25 * contrast * coarse, np.ones_like(coarse), 1 - 0.25 * contrast * coarse], axis=1)
@@ -323,7 +357,7 @@ def _sky_colour(world: World, unit: np.ndarray) -> np.ndarray:
     up = np.clip(-unit[:, 1], 0.0, 1.0)
     base = sky.horizon + (sky.zenith - sky.horizon) * np.sqrt(up)[:, None]
     sun_glow = np.clip(matmul(unit, sky.sun), 0, 1) ** 64
-    colour = base + 0.6 * sun_glow[:, None]
+    colour = base + sky.glow * sun_glow[:, None]
     # Clouds on a plane far overhead: a function of direction only, identical in both cameras.
     rising = up > 0.02
     k = np.flatnonzero(rising)

@@ -12,7 +12,10 @@ import cv2
 import numpy as np
 
 from offroad_path.config import WorldConfig
-from offroad_path.world.classes import BASE_COLORS, DIRT, GRASS, PAVED, WATER
+from offroad_path.world.appearance import LIGHTS, TRACKS, Appearance, appearance_rng, draw_appearance, rut_colour
+from offroad_path.world.appearance import palette as look_palette
+from offroad_path.world.classes import BASE_COLORS, DIRT, GRASS, PAVED, TEXTURE_CONTRAST, WATER
+from offroad_path.world.dressing import add_undergrowth, reshape_vegetation, rut_map
 from offroad_path.world.kernels import gaussian_blur, matmul, norm_rows, resize_cubic
 from offroad_path.world.objects import Objects
 from offroad_path.world.placement import Placement, place_objects
@@ -39,6 +42,11 @@ class Sky:
     zenith: np.ndarray
     horizon: np.ndarray
     cloud_cover: float
+    sun_strength: float = 0.9  # direct light; 0 under overcast
+    ambient: float = 0.35  # the sky's light, times `zenith`
+    sun_colour: np.ndarray | None = None  # None: white
+    fog_m: float = 220.0  # distance at which 63 % of the light is haze
+    glow: float = 0.6  # the sun's disc and halo in the sky
 
 
 @dataclass
@@ -58,6 +66,11 @@ class World:
     textures: dict[str, np.ndarray]
     forks: list[Curve]  # side tracks the drive does not take
     slip: Slip | None = None  # traction below the bicycle model's (world.slip); None: none
+    look: Appearance | None = None  # world.appearance; None: the single look of the worlds before it
+    contrast: np.ndarray | None = None  # (8,) texture contrast per class; None: classes.TEXTURE_CONTRAST
+    wear: np.ndarray | None = None  # (rows, cols) uint8 on material_grid: the track's ruts, 255 = fully worn
+    rut_colour: np.ndarray | None = None  # the ruts' albedo, blended in by wear x rut_strength
+    rut_strength: float = 0.0
 
     def surface(self, xz: np.ndarray) -> np.ndarray:
         """Class ids (N,) of the ground at points xz (N, 2)."""
@@ -79,8 +92,12 @@ def vehicle_geometry(cfg: WorldConfig) -> VehicleGeometry:
     )
 
 
-def build_world(cfg: WorldConfig, seed: int) -> World:
+def build_world(cfg: WorldConfig, seed: int, held_out_look: bool = False) -> World:
+    """The world drawn from `seed`; held_out_look: its appearance one of world.appearance.held_out's
+    combinations (the held-out-appearance test worlds)."""
     rng = np.random.default_rng(seed)
+    look = draw_appearance(seed, held_out_combinations(cfg), held_out_look) if cfg.appearance.enabled else None
+    dress = appearance_rng(seed) if look else None
     density = rng.uniform(1 - cfg.density_jitter, 1 + cfg.density_jitter, size=4)
     frame_s = frame_arc_lengths(rng, cfg.frames, cfg.fps, (cfg.speed_min_mps, cfg.speed_max_mps))
     drive_len = frame_s[-1] + cfg.max_distance_m + 20.0
@@ -109,6 +126,7 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
     _paint_ragged(rng, materials, mgrid, (track.xz, cfg.track_width_m), DIRT)
     _paint_paved(rng, materials, mgrid, track, cfg)
     puddles = _puddles(rng, track, cfg.puddles_per_100m * density[1], cfg.track_width_m)
+    puddles += _puddles(dress, track, 2 * cfg.puddles_per_100m, cfg.track_width_m) if look and look.wet else []  # wet: more
     for centre, axes, angle in puddles:
         c = tuple(int(v) for v in np.rint(mgrid.to_pixel(centre[None])[0]))
         ax = tuple(int(v) for v in np.rint(np.asarray(axes) / MATERIAL_STEP_M))
@@ -130,10 +148,74 @@ def build_world(cfg: WorldConfig, seed: int) -> World:
 
     sky = _sky(rng, cfg)
     objects = place_objects(Placement(rng, cfg, terrain, drive), track, density)
-    shadow = _shadow_map(mgrid, terrain, objects, sky.sun)
     palette = _palette(rng)
     textures = _textures(rng)
-    return World(terrain, materials, mgrid, shadow, objects, palette, sky, drive, track, frame_s, poses, steering, textures, forks, slip)
+    world = World(
+        terrain,
+        materials,
+        mgrid,
+        np.ones(0, np.float32),
+        objects,
+        palette,
+        sky,
+        drive,
+        track,
+        frame_s,
+        poses,
+        steering,
+        textures,
+        forks,
+        slip,
+    )
+    if look:
+        _apply_look(world, look, dress, cfg)
+    world.shadow = (
+        _shadow_map(mgrid, terrain, world.objects, world.sky.sun) if world.sky.sun_strength > 0 else np.ones(mgrid.shape, np.float32)
+    )
+    return world
+
+
+def _apply_look(world: World, look: Appearance, dress: np.random.Generator, cfg: WorldConfig) -> None:
+    """Dress `world` in `look`, drawing from the appearance's generator `dress` (before its shadows are cast)."""
+    world.look = look
+    world.sky = light_sky(look, dress)
+    world.palette = look_palette(look, dress, world.palette)
+    world.objects = reshape_vegetation(world.objects, look, dress, world.palette)
+    add_undergrowth(Placement(dress, cfg, world.terrain, world.drive, world.objects), look, world.palette)
+    world.textures["dapple"] = np.clip(value_noise(dress, (512, 512), 10.0) * 2.0 - 0.3, 0.0, 1.0)  # sun through gaps in crowns
+    world.contrast = TEXTURE_CONTRAST.copy()
+    world.contrast[GRASS] = dress.uniform(0.3, 0.7)
+    world.contrast[DIRT] = TRACKS[look.track]["contrast"] or world.contrast[GRASS]
+    if ruts := rut_colour(look, world.palette):
+        world.wear, (world.rut_colour, world.rut_strength) = rut_map(world.material_grid, world.track, world.materials), ruts
+
+
+def held_out_combinations(cfg: WorldConfig) -> list[dict[str, str]]:
+    return [dict(c) for c in cfg.appearance.held_out]
+
+
+def light_sky(look: Appearance, rng: np.random.Generator) -> Sky:
+    """The sky of the look's light: sun direction and strength, sky light, haze and clouds."""
+    elevation_deg, strength, ambient, sun_colour, fog_m, cloud = LIGHTS[look.light]
+    elevation = np.deg2rad(rng.uniform(*elevation_deg))
+    azimuth = rng.uniform(0, 2 * np.pi)
+    sun = np.array([np.cos(elevation) * np.sin(azimuth), -np.sin(elevation), np.cos(elevation) * np.cos(azimuth)])
+    grey = look.light in ("overcast", "hazy")
+    zenith = (np.array([0.62, 0.64, 0.68]) if grey else np.array([0.25, 0.45, 0.85])) * rng.uniform(0.8, 1.1)
+    horizon = (np.array([0.80, 0.80, 0.80]) if grey else np.array([0.75, 0.82, 0.90])) * rng.uniform(0.85, 1.05)
+    if look.light == "low_sun":
+        horizon = horizon * np.array([1.1, 0.9, 0.75])
+    return Sky(
+        sun=sun,
+        zenith=zenith,
+        horizon=horizon,
+        cloud_cover=float(rng.uniform(*cloud)),
+        sun_strength=strength * rng.uniform(0.9, 1.1),
+        ambient=ambient * rng.uniform(0.9, 1.1),
+        sun_colour=np.asarray(sun_colour),
+        fog_m=float(rng.uniform(*fog_m)),
+        glow=0.6 * strength,
+    )
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> Grid:

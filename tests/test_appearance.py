@@ -1,0 +1,118 @@
+"""Issue 44: each world's look drawn from a stream of its own, and the sensor between light and bytes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from offroad_path.world.appearance import TRACKS, Sensor, draw_appearance
+from offroad_path.world.classes import DIRT, GRASS
+from offroad_path.world.conditions import frame_conditions
+from offroad_path.world.groups import GROUPS
+from offroad_path.world.held_out import held_out_look, required_groups
+from offroad_path.world.record import camera_for
+from offroad_path.world.render import render_view
+from offroad_path.world.scene import build_world
+from offroad_path.world.sensor import expose, jpeg_like, record
+
+SMALL = ("world.width=64", "world.height=36", "world.frames=20", "world.max_distance_m=40")
+HELD_OUT = [{"track": "ruts", "season": "autumn"}, {"track": "gravel", "light": "low_sun"}]
+
+
+def plain_sensor(**changes) -> Sensor:
+    base = dict(greyscale=False, exposure=1.0, auto_gain=False, target=0.18, white_balance=(1.0, 1.0, 1.0), noise_dn=0.0)
+    return Sensor(**(base | dict(vignetting=0.0, shutter_s=0.0, jpeg_quality=0) | changes))
+
+
+def test_no_training_world_shows_a_held_out_look_and_every_held_out_world_shows_one():
+    seen = [draw_appearance(seed, HELD_OUT) for seed in range(300)]
+    held = [draw_appearance(seed, HELD_OUT, held_out_look=True) for seed in range(60)]
+
+    def matches(look) -> bool:
+        return any(all(getattr(look, k) == v for k, v in c.items()) for c in HELD_OUT)
+
+    assert not any(matches(look) for look in seen)
+    assert all(matches(look) and look.held_out for look in held)
+    assert {look.track for look in seen} == set(TRACKS)  # every surface occurs (ruts with other seasons)
+    assert {look.sensor.greyscale for look in seen} == {True, False}
+
+
+def test_a_look_changes_the_appearance_not_the_drive(compose_config):
+    plain = build_world(compose_config(*SMALL, "world.appearance.enabled=false").world, 5)
+    dressed = build_world(compose_config(*SMALL).world, 5)
+    assert plain.look is None and dressed.look is not None
+    np.testing.assert_array_equal(plain.drive.xz, dressed.drive.xz)
+    np.testing.assert_array_equal(plain.frame_s, dressed.frame_s)
+    np.testing.assert_array_equal(plain.materials, dressed.materials)
+    assert len(dressed.objects.kind) > len(plain.objects.kind)  # crowns of several lumps, grass, logs
+
+
+@pytest.mark.parametrize("track", ["grass_track", "none", "ruts"])
+def test_a_track_of_the_grass_colour_differs_from_it_only_by_wear(compose_config, track):
+    cfg = compose_config(*SMALL).world
+    seed = next(s for s in range(500) if draw_appearance(s, [dict(c) for c in cfg.appearance.held_out]).track == track)
+    world = build_world(cfg, seed)
+    np.testing.assert_array_equal(world.palette[DIRT], world.palette[GRASS])
+    assert (world.wear is None) == (track == "none")
+    if world.wear is not None:  # ruts only on the track's cells
+        assert world.wear.any() and not world.wear[world.materials != DIRT].any()
+
+
+def test_conditions_name_each_world_look_and_the_test_set_needs_the_look_groups(compose_config):
+    cfg = compose_config(*SMALL).world
+    world = build_world(cfg, 3, held_out_look=True)
+    rows = frame_conditions(world, cfg)
+    assert {r["look"] for r in rows} == {"held_out"} and {r["track"] for r in rows} == {world.look.track}
+    assert "held_out_look" in required_groups(cfg) and held_out_look(cfg, 1) and not held_out_look(cfg, 2)
+    plain = compose_config(*SMALL, "world.appearance.enabled=false").world
+    assert not {"grass_track", "no_track", "held_out_look"} & set(required_groups(plain))
+    assert {key for key, _, _ in GROUPS} >= {"shadow_water", "dappled", "grass_track", "no_track", "seen_look", "held_out_look"}
+
+
+def test_auto_gain_brings_the_mean_luminance_to_the_target_and_sky_does_not_blur():
+    rng = np.random.default_rng(0)
+    linear = rng.uniform(0.05, 0.15, (16, 24, 3))
+    out = expose(linear, np.zeros((16, 24)), plain_sensor(auto_gain=True, target=0.2), motion_m=1.0)
+    luma = out @ np.array([0.2126, 0.7152, 0.0722])
+    assert luma.mean() == pytest.approx(0.2, rel=1e-3)
+    np.testing.assert_allclose(out / linear, out[0, 0, 0] / linear[0, 0, 0])  # one gain; depth 0 (sky): no blur
+
+
+def test_motion_blur_smears_near_ground_more_than_far():
+    linear = np.zeros((40, 40, 3))
+    linear[:, ::2] = 1.0  # vertical stripes
+    depth = np.full((40, 40), 50.0)
+    depth[:, :20] = 2.0  # left half near
+    out = expose(linear, depth, plain_sensor(), motion_m=0.5)
+    near, far = out[10:30, 2:12, 0], out[10:30, 28:38, 0]
+    assert near.std() < 0.5 * far.std()
+
+
+def test_the_sensor_records_noise_of_its_strength_grey_where_greyscale_and_the_same_bytes_for_the_same_key():
+    flat = np.full((64, 64, 3), 128.0)
+    noisy = record(flat, plain_sensor(noise_dn=4.0), (1, 2)).astype(float)
+    assert noisy.std() == pytest.approx(4.0, rel=0.1)
+    np.testing.assert_array_equal(record(flat, plain_sensor(noise_dn=4.0), (1, 2)), noisy)
+    assert not np.array_equal(record(flat, plain_sensor(noise_dn=4.0), (1, 3)), noisy)
+    colour = np.random.default_rng(1).uniform(0, 255, (16, 16, 3))
+    grey = record(colour, plain_sensor(greyscale=True), (0,))
+    assert (grey[..., 0] == grey[..., 1]).all() and (grey[..., 1] == grey[..., 2]).all()
+
+
+def test_jpeg_like_compression_loses_more_at_lower_quality():
+    rng = np.random.default_rng(2)
+    image = np.clip(rng.normal(128, 40, (32, 40, 3)), 0, 255)
+    errors = [np.abs(jpeg_like(image, q) - image).mean() for q in (100, 75, 30)]
+    assert errors[0] < 2.0 and errors[0] < errors[1] < errors[2]
+    smooth = np.tile(np.linspace(0, 255, 40), (32, 1))[..., None].repeat(3, axis=2)
+    assert np.abs(jpeg_like(smooth, 90) - smooth).max() <= 6  # a smooth ramp survives
+
+
+def test_a_dressed_world_renders_through_its_sensor(compose_config):
+    cfg = compose_config(*SMALL).world
+    world = build_world(cfg, 11)
+    camera = camera_for(cfg)
+    a = render_view(world, camera, world.poses[3], cfg.max_distance_m, motion_m=0.1, noise_key=(11, 3, 0))
+    b = render_view(world, camera, world.poses[3], cfg.max_distance_m, motion_m=0.1, noise_key=(11, 3, 0))
+    np.testing.assert_array_equal(a.image, b.image)
+    assert a.image.shape == (36, 64, 3) and a.image.std() > 5
