@@ -149,7 +149,12 @@ def test_outputs_follow_the_contract(scored, tmp_path):
     assert all(g["unet-none"] == 1.0 for g in groups.values() if g["frames"])
     assert groups["all"]["fcn-none"] == metrics["fcn-none"]["raw"]["iou"]
     assert "## Results by condition" in (tmp_path / "evaluation" / "results.md").read_text()
-    assert set(metrics["baselines"]) == {"non_corresponding.unet-none", "non_corresponding.fcn-none", "mean_path_prior"}
+    assert set(metrics["baselines"]) == {
+        "non_corresponding.unet-none",
+        "non_corresponding.fcn-none",
+        "mean_path_prior",
+        "colour_classifier",
+    }
     assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 | 1.000 |" in (tmp_path / "evaluation" / "results.md").read_text()
     assert len((tmp_path / "evaluation" / "results.csv").read_text().splitlines()) == 5
     curve = np.loadtxt(tmp_path / "pr" / "unet-none.csv", delimiter=",", skiprows=1)

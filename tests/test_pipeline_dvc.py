@@ -79,14 +79,18 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     # evaluate: every run with and without post-processing, the baselines, curves and figures.
     metrics = json.loads((repo_copy / "metrics" / "evaluation.json").read_text())
     assert set(metrics) == {f"{m}-{p}" for m in GRID for p in ("none", "segmentation")} | {
-        "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition"}  # fmt: skip
+        "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition", "held_out_looks"}  # fmt: skip
     assert all(0 <= metrics[r][pp]["accuracy"] <= 1 for r in metrics if "raw" in metrics[r] for pp in ("raw", "postprocessed"))
     # path against steering: PilotNet (train_steering ran before evaluate), every run, the ceiling
     runs = {r for r in metrics if "raw" in metrics[r]}
     paired = {f"{r}_vs_pilotnet" for r in runs}  # each with its paired interval
     assert set(metrics["steering_from_paths"]) == runs | paired | {"straight_ahead", "pilotnet", "label_ceiling"}
-    scored = runs | {"mean_path_prior"}
-    against_prior = {f"{r}.minus_prior" for r in runs}  # each network minus the prior, paired
+    # Test world 1 has a held-out look (world.appearance.held_out): every run and baseline scored on both kinds of look.
+    assert set(metrics["held_out_looks"]) == runs | {"mean_path_prior", "colour_classifier"}
+    scored = runs | {"mean_path_prior", "colour_classifier"}
+    against_prior = {
+        f"{r}.minus_prior" for r in runs | {"colour_classifier"}
+    }  # each network (and the colour baseline) minus the prior, paired
     assert set(metrics["by_condition"]["all"]) == scored | {f"{r}.interval" for r in scored} | against_prior | {"frames", "sequences"}
     assert len((repo_copy / "data" / "evaluation" / "results.csv").read_text().splitlines()) == 1 + 2 * 2 * len(GRID)
     assert len(list((repo_copy / "metrics" / "precision_recall").glob("*.csv"))) == 2 * len(GRID)

@@ -33,7 +33,7 @@ def test_a_network_and_the_prior_on_the_real_snippet(kitti_labels, trained, tmp_
     prior = np.zeros((288, 512), bool)
     prior[144:, 128:384] = True  # the bottom half's middle, at the synthetic label size
     rows = score_real({"unet-none": checkpoint}, frames, prior, 0.5, Resampling(1000, 0))
-    assert list(rows) == ["unet-none", "mean_path_prior"]
+    assert list(rows) == ["unet-none", "mean_path_prior", "other_labels"]
     # The prior stretched to 1226 x 370 (nearest neighbour) covers rows from 144 * 370 / 288 = 185 and
     # columns from 128 * 1226 / 512 = 306.5 to 384 * 1226 / 512 = 919.5.
     stretched = np.zeros((h, w), bool)
@@ -96,3 +96,23 @@ def test_diversity_and_the_label_centred_gain_by_hand():
     alike = separability(same, {"perfect": row})
     assert alike.largest_gain == 0 and np.isnan(row.gain) and not alike.separable
     assert "cannot separate perception from a prior" in alike.sentence()
+
+
+def test_far_end_correlation_and_the_other_frames_label_by_hand():
+    from offroad_path.evaluation.real import correlation, far_end, leave_one_out_labels, real_row
+
+    paths = np.zeros((3, 10, 5), bool)
+    paths[0, 2:, 0:2] = True  # far end (rows 2 and 3: ceil(0.1 * 8) = 1 row, row 2) at columns 0, 1
+    paths[1, 5:, 4] = True  # column 4
+    np.testing.assert_allclose(far_end(paths), [(0.5 / 4) * 2 - 1, 1.0, np.nan])
+    x, y = np.array([0.0, 1.0, 2.0, 3.0]), np.array([1.0, 3.0, 2.0, 5.0])
+    stats = np.stack([x, y, x * x, y * y, x * y, np.ones(4)], -1).sum(0)
+    assert correlation(stats) == pytest.approx(np.corrcoef(x, y)[0, 1])
+    assert np.isnan(correlation(np.stack([x * 0, y, x * 0, y * y, x * 0, np.ones(4)], -1).sum(0)))  # a constant: undefined
+    # Other frames' mean label: frame 0's copy (same frame, mirrored) is left out with it.
+    frames = hand_frames([[1, 1, 0, 0], [0, 1, 1, 0], [0, 0, 1, 1], [0, 1, 1, 1]], [-1, 0, 1, 1], [0, 0, 1, 1])
+    frames.groups = [("s", 0), ("s", 0), ("s", 1), ("s", 2)]
+    np.testing.assert_array_equal(leave_one_out_labels(frames)[:, 0], [[0, 0, 1, 1], [0, 0, 1, 1], [0, 1, 1, 0], [0, 1, 1, 0]])
+    # A constant prediction: no far-end correlation; every seed scored, the seeds pooled.
+    constant = real_row("constant", np.broadcast_to(frames.labels[0], (2, *frames.labels.shape)), frames, Resampling(200, 0))
+    assert np.isnan(constant.far_end) and constant.gain == pytest.approx(0.0)

@@ -57,7 +57,8 @@ class HeldOutLooks:
         if not self.rows:
             return ""
         rows = [
-            LookRow(_title(key), seen, out, "" if loss is None else loss.difference_text()) for key, (seen, out, loss) in self.rows.items()
+            LookRow(look_title(key), seen, out, "" if loss is None else loss.difference_text())
+            for key, (seen, out, loss) in self.rows.items()
         ]
         return (
             f"\n## Held-out appearance\n\nPooled IoU (raw maps) on the {self.worlds[1]} test worlds drawn with a look no training "
@@ -78,5 +79,9 @@ class HeldOutLooks:
         return {"held_out_looks": {key: entry(*row) for key, row in self.rows.items()}} if self.rows else {}
 
 
-def _title(key: str) -> str:
-    return {"mean_path_prior": "mean path prior", "colour_classifier": "colour classifier"}.get(key, method_title(key))
+BASELINES = {"mean_path_prior": "mean path prior", "colour_classifier": "colour classifier"}
+
+
+def look_title(key: str) -> str:
+    """A row's name: a baseline's, or a run's method title."""
+    return BASELINES[key] if key in BASELINES else method_title(key)

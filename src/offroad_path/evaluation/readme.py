@@ -21,6 +21,7 @@ from pathlib import Path
 
 from offroad_path.driving.counts import power_sentence
 from offroad_path.evaluation.bootstrap import Interval
+from offroad_path.evaluation.looks import look_title
 from offroad_path.evaluation.primaries import Verdict, verdicts
 from offroad_path.evaluation.tables import method_title, network_name, split_run_name
 from offroad_path.world.groups import GROUPS
@@ -106,6 +107,7 @@ def results_markdown(  # noqa: PLR0913
         *_baselines(evaluation),
         *_steering(evaluation, steering),
         *_conditions(evaluation, runs),
+        *_looks(evaluation),
         *_temporal(evaluation),
         *_driving(drive or {}, conclusions),
     ]
@@ -190,12 +192,40 @@ def _baselines(evaluation: dict) -> list[str]:
         return []
     others = [v["iou"] for k, v in b.items() if k.startswith("non_corresponding.") and v.get("iou") is not None]
     spread = f" score IoU {min(others):.3f} to {max(others):.3f}" if others else " cannot be scored"
+    colour = b.get("colour_classifier")
+    colour_text = (
+        f" A per-pixel classifier on colour and image position alone (gradient-boosted trees on RGB, HSV, row and column, "
+        f"trained on the training split) scores accuracy {colour['accuracy']:.3f} and IoU {colour['iou']:.3f}: what a network "
+        "scores above it needs context, the track's shape and where it leads."
+        if colour and colour.get("iou") is not None
+        else ""
+    )
     return [
         f"What a model must beat, on the same test set: the mean path prior (the average training label, thresholded, on every "
         f"image) scores accuracy {b['mean_path_prior']['accuracy']:.3f} and IoU {b['mean_path_prior']['iou']:.3f}; each network's "
         f"outputs against every *other* test frame's ground truth (the paper's non-corresponding baseline; paper: IoU 0.41)"
-        f"{spread}.\n"
+        f"{spread}.{colour_text}\n"
     ]
+
+
+def _looks(evaluation: dict) -> list[str]:
+    """The held-out-appearance table: each method's IoU on the seen and the held-out looks, and the loss."""
+    looks = evaluation.get("held_out_looks")
+    if not looks:
+        return []
+    lines = [
+        "Outside the training looks (exploratory): the test worlds drawn with a look no training drive shows "
+        "(`world.appearance.held_out`) against the other test worlds, each network's seeds pooled; held-out minus seen with its "
+        "95 % hierarchical interval (both sets scored on the same draw of all test worlds and seeds). The two sets are different "
+        "worlds, so the mean path prior's row shows how much of a difference is the drives themselves.\n",
+        "| method | IoU, seen looks | IoU, held-out looks | held-out minus seen [95 %] |",
+        "| --- | --- | --- | --- |",
+    ]
+    for key, entry in looks.items():
+        name = look_title(key)
+        loss = f"{entry['loss']:+.3f} [{entry['loss_low']:+.3f}, {entry['loss_high']:+.3f}]" if "loss" in entry else "n/a"
+        lines.append(f"| {name} | {_f(entry['seen_iou'])} | {_f(entry['held_out_iou'])} | {loss} |")
+    return [*lines, ""]
 
 
 def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
@@ -240,15 +270,19 @@ def _conditions(evaluation: dict, runs: list[str]) -> list[str]:
         return []
     scratch = [r for r in runs if split_run_name(r)[1] == "none"]
     titles = {key: title for key, title, _ in GROUPS}
+    colour = int(any("colour_classifier" in row for row in c.values()))
     lines = [
         "By condition of the next 20 m of driving (raw maps, networks without pretraining; IoU [95 % hierarchical interval: the "
         "test worlds and blocks that hold the group's frames, and the seeds]; exploratory):\n",
-        "| condition | test images | test sequences | " + " | ".join(method_title(r) for r in scratch) + " | mean path prior |",
-        "|" + " --- |" * (4 + len(scratch)),
+        "| condition | test images | test sequences | "
+        + " | ".join(method_title(r) for r in scratch)
+        + " | mean path prior |"
+        + (" colour classifier |" if colour else ""),
+        "|" + " --- |" * (4 + len(scratch) + colour),
     ]
     for key, row in c.items():
         cells = []
-        for name in [*scratch, "mean_path_prior"]:
+        for name in [*scratch, "mean_path_prior", *(["colour_classifier"] if colour else [])]:
             bounds = row.get(f"{name}.interval")
             cells.append(_f(row.get(name)) + (f" [{bounds[0]:.3f}, {bounds[1]:.3f}]" if bounds else ""))
         lines.append(f"| {titles.get(key, key)} | {row['frames']} | {row.get('sequences', 'n/a')} | " + " | ".join(cells) + " |")

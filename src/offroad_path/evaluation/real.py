@@ -35,7 +35,7 @@ import torch
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.loading import read
 from offroad_path.data.splitting import block_of
-from offroad_path.evaluation.bootstrap import Resampling, block_sums, interval, mean
+from offroad_path.evaluation.bootstrap import Resampling, block_sums, mean, score_draws
 from offroad_path.evaluation.metrics import counts, non_corresponding, pooled
 from offroad_path.evaluation.scores import iou
 from offroad_path.evaluation.tables import method_title
@@ -53,6 +53,9 @@ class RealRow:
     gain: float = field(metadata={"title": "label-centred gain over frames bending the other way"})
     gain_low: float = field(default=float("nan"), metadata={"title": "gain, 95 % low"})
     gain_high: float = field(default=float("nan"), metadata={"title": "gain, 95 % high"})
+    far_end: float = field(default=float("nan"), metadata={"title": "far-end correlation with the label's"})
+    far_end_low: float = field(default=float("nan"), metadata={"title": "far end, 95 % low"})
+    far_end_high: float = field(default=float("nan"), metadata={"title": "far end, 95 % high"})
 
 
 @dataclass
@@ -150,24 +153,81 @@ def label_centred_gain(matrix: np.ndarray, frames: RealFrames) -> np.ndarray:
     return np.where(turned.any(axis=0), np.diag(matrix) - others, np.nan)
 
 
+FAR_ROWS = 0.1  # the far end of a path: its pixels in the top tenth of the rows it covers
+
+
+def far_end(paths: np.ndarray) -> np.ndarray:
+    """(..., N) the far end of each path (..., N, H, W) bool: the mean column of its pixels in the top
+    FAR_ROWS of the rows it covers, from -1 (left edge) to 1 (right edge); nan for an empty path."""
+    h, w = paths.shape[-2:]
+    flat = paths.reshape(-1, h, w)
+    out = np.full(len(flat), np.nan)
+    for i, path in enumerate(flat):
+        rows = np.flatnonzero(path.any(axis=1))
+        if len(rows):
+            top = rows[: max(1, int(np.ceil(FAR_ROWS * len(rows))))]
+            out[i] = np.nonzero(path[top])[1].mean() / (w - 1) * 2 - 1
+    return out.reshape(paths.shape[:-2])
+
+
+def correlation(s: np.ndarray) -> np.ndarray:
+    """Pearson's r from statistics (..., 6) = sums of (x, y, x^2, y^2, xy, 1): resampled like a pooled score."""
+    n = s[..., 5]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mx, my = s[..., 0] / n, s[..., 1] / n
+        cov = s[..., 4] / n - mx * my
+        var = (s[..., 2] / n - mx**2) * (s[..., 3] / n - my**2)
+        return np.where(var > 1e-12, cov / np.sqrt(np.maximum(var, 1e-300)), np.nan)
+
+
 def real_row(method: str, predicted: np.ndarray, frames: RealFrames, resampling: Resampling | None = None) -> RealRow:
-    """predicted: (N, H, W) bool paths on the frames. The pooled IoU and the mean label-centred gain
-    each get a block-bootstrap interval with `resampling`."""
-    own = pooled(counts(predicted.astype(np.float32), frames.labels)).iou
-    other = non_corresponding(predicted, frames.labels, frames.groups).iou
-    gain = label_centred_gain(iou_matrix(predicted, frames.labels), frames)
-    kept = np.isfinite(gain)
-    bounds = [float("nan")] * 4
+    """predicted: (N, H, W) bool paths on the frames, or (S, N, H, W) one per training seed. The pooled
+    IoU, the mean label-centred gain and the far-end correlation each get a bootstrap interval with
+    `resampling` over the recording's blocks and the seeds."""
+    seeds = predicted if predicted.ndim == 4 else predicted[None]
+    confusion = np.stack([counts(p.astype(np.float32), frames.labels) for p in seeds])  # (S, N, 4)
+    other = float(np.mean([non_corresponding(p, frames.labels, frames.groups).iou for p in seeds]))
+    gain = np.stack([label_centred_gain(iou_matrix(p, frames.labels), frames) for p in seeds])  # (S, N)
+    kept = np.isfinite(gain[0])
+    x, y = far_end(seeds), far_end(frames.labels)[None].repeat(len(seeds), 0)  # (S, N)
+    ends = np.isfinite(x).all(axis=0) & np.isfinite(y[0])
+    ends_stats = np.stack([x, y, x * x, y * y, x * y, np.ones_like(x)], -1)[:, ends]  # (S, N', 6)
     blocks = frames.blocks if len(set(frames.blocks)) >= 2 else frames.groups
+    estimates = [
+        pooled(confusion.reshape(-1, 4)).iou,
+        float(gain[:, kept].mean()) if kept.any() else float("nan"),
+        float(correlation(ends_stats.sum(axis=(0, 1)))) if ends.any() else float("nan"),
+    ]
+    bounds = [(float("nan"), float("nan"))] * 3
     if resampling is not None:
-        found = interval(block_sums(counts(predicted.astype(np.float32), frames.labels), blocks), iou, resampling)
-        bounds[:2] = [found.low, found.high]
-        kept_blocks = [b for b, k in zip(blocks, kept, strict=True) if k]
-        if len(set(kept_blocks)) >= 2:
-            gained = interval(block_sums(np.stack([gain[kept], np.ones(kept.sum())], 1), kept_blocks), mean, resampling)
-            bounds[2:] = [gained.low, gained.high]
-    mean_gain = float(gain[kept].mean()) if kept.any() else float("nan")
-    return RealRow(method, own, *bounds[:2], other, mean_gain, *bounds[2:])
+        bounds[0] = _bounds(confusion, blocks, iou, resampling)
+        if kept.any():
+            bounds[1] = _bounds(np.stack([gain[:, kept], np.ones_like(gain[:, kept])], -1), _pick(blocks, kept), mean, resampling)
+        if ends.any():
+            bounds[2] = _bounds(ends_stats, _pick(blocks, ends), correlation, resampling)
+    return RealRow(method, estimates[0], *bounds[0], other, estimates[1], *bounds[1], estimates[2], *bounds[2])
+
+
+def _pick(blocks: list, keep: np.ndarray) -> list:
+    return [b for b, k in zip(blocks, keep, strict=True) if k]
+
+
+def _bounds(per_item: np.ndarray, blocks: list, score, resampling: Resampling) -> tuple[float, float]:
+    """The 95 % interval of `score` over the blocks (each its own unit: one recording) and the seeds."""
+    if len(set(blocks)) < 2:
+        return float("nan"), float("nan")
+    sums = block_sums(per_item, blocks)
+    found = score_draws(sums if len(sums) > 1 else sums[0], score, resampling).interval()
+    return found.low, found.high
+
+
+def leave_one_out_labels(frames: RealFrames) -> np.ndarray:
+    """(N, H, W) bool: for each frame, the mean of the other frames' labels (its own frame's mirrored
+    copy left out too) above 0.5: a baseline that knows the recording's paths but not the image."""
+    different = _different(frames.groups)
+    labels = frames.labels.reshape(len(frames.labels), -1).astype(np.float64)
+    totals = different.astype(np.float64) @ labels  # (N, H*W) sums over the other frames
+    return (totals / different.sum(1, keepdims=True) > 0.5).reshape(frames.labels.shape)
 
 
 def _different(groups: list) -> np.ndarray:
@@ -189,20 +249,23 @@ def separability(frames: RealFrames, rows: dict[str, RealRow]) -> Separability:
 
 
 def score_real(
-    checkpoints: dict[str, Path], frames: RealFrames, prior: np.ndarray, threshold: float, resampling: Resampling | None = None
+    checkpoints: dict[str, Path | list[Path]], frames: RealFrames, prior: np.ndarray, threshold: float, resampling: Resampling | None = None
 ) -> dict[str, RealRow]:
-    """Rows keyed by run (checkpoints: run -> its network), then 'mean_path_prior' (prior: (h, w)
-    bool at the training labels' size, stretched to the recording's frame)."""
+    """Rows keyed by run (checkpoints: run -> its network, or one per training seed), then
+    'mean_path_prior' (prior: (h, w) bool at the training labels' size, stretched to the recording's
+    frame) and 'other_labels' (leave_one_out_labels)."""
     from offroad_path.inference.runners import TorchModel
 
     rows = {}
-    for run, checkpoint in checkpoints.items():
-        model = TorchModel(checkpoint)
-        confidence = model.predict_all(frames.images)
-        rows[run] = real_row(method_title(run), confidence > threshold, frames, resampling)
+    for run, found in checkpoints.items():
+        paths = found if isinstance(found, list) else [found]
+        predicted = np.stack([TorchModel(path).predict_all(frames.images) > threshold for path in paths])
+        rows[run] = real_row(method_title(run), predicted, frames, resampling)
         log.info("%s on %s: IoU %.3f, against other frames' labels %.3f", run, frames.name, rows[run].iou, rows[run].non_corresponding_iou)
     h, w = frames.labels.shape[1:]
     stretched = cv2.resize(prior.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
     everywhere = np.broadcast_to(stretched, frames.labels.shape)
     rows["mean_path_prior"] = real_row("mean path prior (synthetic training labels)", everywhere, frames, resampling)
+    other = leave_one_out_labels(frames)
+    rows["other_labels"] = real_row("the other frames' mean label (knows the recording, not the image)", other, frames, resampling)
     return rows

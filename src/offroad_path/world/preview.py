@@ -1,12 +1,16 @@
-"""Contact sheets of rendered sequences: left image, semantic map and depth side by side.
+"""Contact sheets of rendered sequences: left image, semantic map and depth side by side, or (with
+--looks) a grid of many worlds' left images, each captioned with its look (world.appearance).
 
 python -m offroad_path.world.preview data/synthetic docs/images/world_samples.png
+python -m offroad_path.world.preview data/synthetic docs/images/world_looks.png --looks 4
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from offroad_path.errors import CommandParser, clear_errors
@@ -30,14 +34,41 @@ def contact_sheet(root: str | Path, rows: int = 3) -> np.ndarray:
     return np.vstack([frame_row(seq, len(seq) // 2) for seq in sequences])
 
 
+def caption(meta: dict) -> str:
+    """A world's look in a few words: track, season, light (grey sensor, held out) from its meta.json."""
+    look = meta.get("appearance")
+    if look is None:
+        return "the single look (no world.appearance)"
+    words = [look["track"], look["season"], look["light"], look["vegetation"]]
+    words += ["grey"] if look["sensor"]["greyscale"] else []
+    words += ["HELD-OUT"] if look["held_out"] else []
+    return " / ".join(words)
+
+
+def look_grid(root: str | Path, columns: int = 4) -> np.ndarray:
+    """Every sequence's middle left image, captioned with its look, `columns` to a row (RGB)."""
+    tiles = []
+    for path in find_sequences(root):
+        seq = open_sequence(path)
+        image = np.ascontiguousarray(seq.load_left(len(seq) // 2))
+        text = caption(json.loads((Path(path) / "meta.json").read_text()))
+        scale, at = image.shape[1] / 700, (4, int(14 * image.shape[1] / 700) + 2)
+        for colour, thickness in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # white on a black outline
+            cv2.putText(image, f"{Path(path).name}: {text}", at, cv2.FONT_HERSHEY_SIMPLEX, 0.4 * scale, colour, thickness)
+        tiles.append(image)
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % columns)
+    return np.vstack([np.hstack(tiles[i : i + columns]) for i in range(0, len(tiles), columns)])
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = CommandParser(prog="python -m offroad_path.world.preview", description=__doc__.splitlines()[0])
     parser.add_argument("sequences", help="a sequence folder or a folder of sequences")
     parser.add_argument("out", help="PNG to write")
     parser.add_argument("--rows", type=int, default=3)
+    parser.add_argument("--looks", type=int, default=0, metavar="COLUMNS", help="a grid of every world's look, COLUMNS wide")
     args = parser.parse_args(argv)
     with clear_errors():
-        sheet = contact_sheet(args.sequences, args.rows)
+        sheet = look_grid(args.sequences, args.looks) if args.looks else contact_sheet(args.sequences, args.rows)
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         write_image(args.out, sheet[:, :, ::-1])
 

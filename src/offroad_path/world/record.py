@@ -108,9 +108,9 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         "distance_m": distance,
         "frames": len(world.poses),
         "world": world_settings(cfg),  # the drive stage and the slip targets rebuild the world from these and the seed
-    }
+    } | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {})
     if world.look is not None:  # only then: a world without a look keeps its meta.json byte for byte
-        meta["appearance"] = asdict(world.look) | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {})
+        meta["appearance"] = asdict(world.look)
     if world.slip is not None:  # only then: a world without slip keeps today's meta.json byte for byte
         meta["steering"] = (
             "the driver's input under slip (world.slip): bicycle-model wheel angle of the true curvature "
