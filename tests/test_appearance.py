@@ -116,3 +116,35 @@ def test_a_dressed_world_renders_through_its_sensor(compose_config):
     b = render_view(world, camera, world.poses[3], cfg.max_distance_m, motion_m=0.1, noise_key=(11, 3, 0))
     np.testing.assert_array_equal(a.image, b.image)
     assert a.image.shape == (36, 64, 3) and a.image.std() > 5
+
+
+def test_held_out_looks_section_by_hand(tmp_path):
+    """Two seen worlds and two held-out ones, one frame each, one run with two seeds: the section's IoU
+    on each kind of look and their difference, counted by hand."""
+    from offroad_path.data.manifest import Sample
+    from offroad_path.evaluation.bootstrap import Resampling
+    from offroad_path.evaluation.looks import HeldOutLooks
+    from offroad_path.evaluation.report import TestSet
+    from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
+    from offroad_path.world.conditions import COLUMNS
+
+    samples = []
+    for name, look in (("a", "seen"), ("b", "seen"), ("c", "held_out"), ("d", "held_out")):
+        (tmp_path / name / "image_l").mkdir(parents=True)
+        row = {"frame": 0, "shadow": 0.0, "water": False, "fork": False, "surface": "dirt", "bend_radius_m": 50.0}
+        row |= {"track": "dirt", "light": "clear", "look": look, "canopy": "open"}
+        (tmp_path / name / "conditions.csv").write_text(",".join(COLUMNS) + "\n" + ",".join(str(row[c]) for c in COLUMNS) + "\n")
+        samples.append(Sample(name, 0, False, str(tmp_path / name / "image_l" / "000000.png"), "", "", "", 1.0, 0.1))
+    # [tp, fp, tn, fn] per frame and seed: seen tp 14, fp 3, fn 3: IoU 14 / 20; held out tp 6, fp 9, fn 5: 6 / 20.
+    seed0 = np.array([[4, 1, 10, 1], [3, 1, 10, 1], [1, 2, 10, 2], [2, 2, 10, 1]], float)
+    seed1 = np.array([[4, 1, 10, 0], [3, 0, 10, 1], [1, 3, 10, 0], [2, 2, 10, 2]], float)
+    labels = np.zeros((4, 2, 2), bool)
+    test = TestSet(["unet-none"], [0, 1], samples, labels, {}, {}, {("unet-none", "no"): [seed0, seed1]}, {}, {}, {}, labels[0], 0.5)
+    test.__dict__["prior_counts"] = np.array([[1, 1, 10, 1]] * 4, float)  # the cached property, by hand: IoU 1/3 on both
+    section = HeldOutLooks(HierarchicalBootstrap([(s.sequence, 0) for s in samples], Resampling(500, 0)))
+    section.score(test)
+    seen, held, loss = section.rows["unet-none"]
+    assert seen == pytest.approx(14 / 20) and held == pytest.approx(6 / 20) and loss.estimate == pytest.approx(6 / 20 - 14 / 20)
+    assert loss.low <= loss.estimate <= loss.high
+    assert section.rows["mean_path_prior"][2].estimate == pytest.approx(0.0)
+    assert section.worlds == (2, 2) and "Held-out appearance" in section.markdown()

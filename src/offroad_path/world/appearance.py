@@ -14,7 +14,7 @@ greyscale and noisy cameras.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -89,7 +89,7 @@ def draw_appearance(seed: int, held_out: list[dict[str, str]], held_out_look: bo
     """The look of the world drawn from `seed`: any combination but the held-out ones, or (held_out_look)
     one of them, its other axes drawn freely."""
     rng = np.random.default_rng(np.random.SeedSequence([seed], spawn_key=(APPEARANCE_STREAM,)))
-    choices = {"track": list(TRACKS), "season": list(SEASONS), "light": list(LIGHTS), "vegetation": list(VEGETATION)}
+    choices = axis_values()
     fixed = dict(held_out[int(rng.integers(len(held_out)))]) if held_out_look and held_out else {}
     for _ in range(1000):
         look = {axis: fixed.get(axis) or str(rng.choice(choices[axis])) for axis in AXES}
@@ -142,6 +142,3 @@ def rut_colour(look: Appearance, albedo: np.ndarray) -> tuple[np.ndarray, float]
 def axis_values() -> dict[str, list[str]]:
     """Every value each axis of `world.appearance.held_out` may name."""
     return {"track": list(TRACKS), "season": list(SEASONS), "light": list(LIGHTS), "vegetation": list(VEGETATION)}
-
-
-SENSOR_FIELDS = tuple(f.name for f in fields(Sensor))

@@ -2,7 +2,7 @@
 --looks) a grid of many worlds' left images, each captioned with its look (world.appearance).
 
 python -m offroad_path.world.preview data/synthetic docs/images/world_samples.png
-python -m offroad_path.world.preview data/synthetic docs/images/world_looks.png --looks 4
+python -m offroad_path.world.preview data/synthetic docs/images/world_looks.jpg --looks 4
 """
 
 from __future__ import annotations
@@ -45,16 +45,16 @@ def caption(meta: dict) -> str:
     return " / ".join(words)
 
 
-def look_grid(root: str | Path, columns: int = 4) -> np.ndarray:
-    """Every sequence's middle left image, captioned with its look, `columns` to a row (RGB)."""
+def look_grid(root: str | Path, columns: int = 4, width: int = 512) -> np.ndarray:
+    """Every sequence's middle left image at `width` pixels, captioned with its look, `columns` to a row (RGB)."""
     tiles = []
     for path in find_sequences(root):
         seq = open_sequence(path)
-        image = np.ascontiguousarray(seq.load_left(len(seq) // 2))
-        text = caption(json.loads((Path(path) / "meta.json").read_text()))
-        scale, at = image.shape[1] / 700, (4, int(14 * image.shape[1] / 700) + 2)
+        image = seq.load_left(len(seq) // 2)
+        image = cv2.resize(image, (width, round(image.shape[0] * width / image.shape[1])), interpolation=cv2.INTER_LINEAR)
+        text = f"{Path(path).name}: {caption(json.loads((Path(path) / 'meta.json').read_text()))}"
         for colour, thickness in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # white on a black outline
-            cv2.putText(image, f"{Path(path).name}: {text}", at, cv2.FONT_HERSHEY_SIMPLEX, 0.4 * scale, colour, thickness)
+            cv2.putText(image, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45 * width / 512, colour, thickness, cv2.LINE_AA)
         tiles.append(image)
     tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % columns)
     return np.vstack([np.hstack(tiles[i : i + columns]) for i in range(0, len(tiles), columns)])
