@@ -58,7 +58,7 @@ def reshape_vegetation(objects: Objects, look: Appearance, rng: np.random.Genera
         elif kind == SPHERE and cls == FOLIAGE:
             _bush(out, rng, np.array(params[:3]), params[3], colour)
         else:
-            out._add(kind, params, cls, colour)
+            out.add(kind, params, cls, colour)
     return out
 
 

@@ -42,16 +42,17 @@ class Objects:
     _arrays: ObjectArrays | None = field(default=None, repr=False, compare=False)
 
     def add_sphere(self, centre: np.ndarray, radius: float, cls: int, color: np.ndarray) -> None:
-        self._add(SPHERE, (*map(float, centre), float(radius)), cls, color)
+        self.add(SPHERE, (*map(float, centre), float(radius)), cls, color)
 
     def add_cylinder(self, xz: np.ndarray, y_span: tuple[float, float], radius: float, cls: int, color: np.ndarray) -> None:
         """An upright cylinder at ground position xz from height y_span[0] (top) to y_span[1] (bottom)."""
-        self._add(CYLINDER, (float(xz[0]), float(xz[1]), float(y_span[0]), float(y_span[1]), float(radius)), cls, color)
+        self.add(CYLINDER, (float(xz[0]), float(xz[1]), float(y_span[0]), float(y_span[1]), float(radius)), cls, color)
 
     def add_box(self, centre: np.ndarray, half: np.ndarray, yaw: float, cls: int, color: np.ndarray) -> None:
-        self._add(BOX, (*map(float, centre), *map(float, half), float(yaw)), cls, color)
+        self.add(BOX, (*map(float, centre), *map(float, half), float(yaw)), cls, color)
 
-    def _add(self, kind: int, params: tuple[float, ...], cls: int, color: np.ndarray) -> None:
+    def add(self, kind: int, params: tuple[float, ...], cls: int, color: np.ndarray) -> None:
+        """One object of `kind` (SPHERE, CYLINDER, BOX) with its parameters as the class docstring lists them."""
         self.kind.append(kind)
         self.params.append(params)
         self.cls.append(int(cls))
