@@ -5,9 +5,7 @@ true poses), beside what needs no perception.
     python benchmarks/transfer_real.py [--recording ../shared/data/kitti00_mono] [--json out.json]
 
 Run after `dvc repro` (it reads data/runs/<run>/seed<k>/checkpoints/best.ckpt and data/split/train.csv).
-The recording has one camera; until the label stage takes mono recordings (issue 45), it is labelled
-from a copy whose right image is the left one (links, in a temporary folder), with the poses from its
-poses.txt and occlusion off, so the right image is never used. Rows (evaluation/real.py): IoU against
+The recording has one camera: the label stage labels it from its poses.txt, without occlusion. Rows (evaluation/real.py): IoU against
 each frame's own label; against the other frames' labels; the label-centred gain over the frames that
 bend the other way (0 for any constant prediction); the correlation of the predicted path's far end
 with the label's. Baselines: the mean path of the synthetic training labels, the other frames' mean
@@ -36,30 +34,22 @@ FOOTPRINT = (
 )
 
 
-def mono_as_stereo(recording: Path, into: Path) -> Path:
-    """A copy of a one-camera recording whose image_r links to image_l (nothing reads it: occlusion off)."""
-    copy = into / recording.name
-    copy.mkdir(parents=True)
-    for name in ("calib.txt", "poses.txt", "times.txt"):
-        (copy / name).symlink_to((recording / name).resolve())
-    (copy / "image_l").symlink_to((recording / "image_l").resolve())
-    (copy / "image_r").symlink_to((recording / "image_l").resolve())
-    return copy
-
-
-def label_recording(recording: Path, out: Path) -> Path:
+def label_recording(recording: Path, out: Path, *overrides: str) -> Path:
+    """The label stage on a KITTI recording (one camera or two) from its true poses, occlusion off
+    (a recording of one camera has no depth to test it by; a stereo one is labelled alike)."""
     from offroad_path.config import load_config
     from offroad_path.label import label
 
     cfg = load_config(
         f"label.in_dir={recording}",
         f"label.out_dir={out}",
-        f"label.metrics_path={out.parent / 'label.json'}",
+        f"label.metrics_path={out.parent / (out.name + '.json')}",
         "label.poses.source=file",
         "label.occlusion.enabled=false",
         "label.workers=1",
         "mlflow.enabled=false",
         *FOOTPRINT,
+        *overrides,
     )
     label(cfg)
     return out
@@ -100,7 +90,7 @@ def main() -> None:
     cfg = load_config()
     e = cfg.evaluate
     with tempfile.TemporaryDirectory() as tmp:
-        labels = label_recording(mono_as_stereo(args.recording, Path(tmp) / "recording"), Path(tmp) / "labels")
+        labels = label_recording(args.recording, Path(tmp) / "labels")
         frames = RealFrames.read(labels, cfg.split.block_m, cfg.label.distance_m)
         prior = mean_path(load_labels(read_manifest(e.train_manifest))) > e.threshold
         checkpoints = {run: [ROOT / e.runs_dir / run / f"seed{seed}" / "checkpoints" / "best.ckpt" for seed in e.seeds] for run in e.runs}

@@ -1,11 +1,13 @@
 """Stage `label`: stereo visual odometry and vehicle-footprint path labels (see docs/design.md).
+A sequence of one camera (no right images) is labelled from its pose file, without occlusion and
+without disparity/; the stage says so once.
 
     python -m offroad_path.label [label.in_dir=/my/recordings] [label.poses.source=file]
         [label.strategy=stride label.stride_m=5] [label.occlusion.enabled=false]
 
 Reads every sequence under label.in_dir and writes, per sequence, under label.out_dir:
 label/NNNNNN.png (0/255 path masks at each f0), disparity/NNNNNN.png (StereoSGBM of f0, KITTI
-format: uint16 = 256 x disparity), poses_vo.txt and steps.csv (with VO), report.csv (every
+format: uint16 = 256 x disparity), poses_vo.txt and steps.csv (with VO) or poses.txt (the file's), report.csv (every
 segment, kept or dropped and why); and summary.json for the run, metrics for DVC and MLflow.
 
 Across machines: label.shards=N label.shard=i labels every N-th sequence from the i-th into a
@@ -93,6 +95,9 @@ def run_metrics(summaries: list[dict], in_dir: Path, need_labels: bool = True) -
     if drifts:
         metrics |= drift_metrics(drifts)
     metrics |= offset_metrics(summaries)
+    mono = sum(s.get("one_camera", False) for s in summaries)
+    if mono:  # the key only then: a stereo run's metrics keep their bytes
+        metrics["one_camera_sequences"] = mono
     if need_labels and not metrics["labels"]:
         raise ValueError(f"{in_dir}: no label could be made; " + "; ".join(f"{s['name']}: {w}" for s in summaries for w in s["warnings"]))
     return metrics
@@ -143,6 +148,13 @@ def label(cfg: DictConfig) -> dict:
             jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
             summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots])
         metrics = run_metrics(summaries, in_dir, need_labels=not sharded(cfg))
+        if metrics.get("one_camera_sequences"):
+            log.warning(
+                "%d of %d sequences have one camera: labelled from their poses without %sdisparity (they need a right image)",
+                metrics["one_camera_sequences"],
+                metrics["sequences"],
+                "occlusion and " if cfg.label.occlusion.enabled else "",
+            )
         (tmp / "summary.json").write_text(json.dumps({"metrics": metrics, "sequences": summaries}, indent=2) + "\n")
         if sharded(cfg):
             (tmp / shards.SHARD_FILE).write_text(shards.shard_record(cfg.label, names))

@@ -42,7 +42,7 @@ def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int]
                 False,
                 str(seq.left[f0]),
                 str(label),
-                str(run.folder / "disparity" / label.name),
+                "" if seq.mono else str(run.folder / "disparity" / label.name),  # one camera: no disparity
                 semantic,
                 seq.calibration.fx,
                 seq.calibration.baseline_m,

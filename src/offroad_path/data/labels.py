@@ -21,8 +21,8 @@ SHARD_FILE = "shard.json"  # in a label shard's folder (labelling/shards.py): a 
 class LabelledSequence:
     name: str
     sequence: Sequence
-    folder: Path  # <labels_dir>/<name>: label/, disparity/, poses_vo.txt, steps.csv
-    poses: np.ndarray  # (N, 4, 4): the poses the labels were made from (VO, else the recording's own)
+    folder: Path  # <labels_dir>/<name>: label/, disparity/ (stereo), poses_vo.txt and steps.csv (VO) or poses.txt (a file's)
+    poses: np.ndarray  # (N, 4, 4): the poses the labels were made from
 
     def distance(self) -> np.ndarray:
         """(N,) metres driven at each frame, along `poses`."""
@@ -55,7 +55,7 @@ def read_label_run(labels_dir: Path) -> list[LabelledSequence]:
     out = []
     for entry in json.loads(summary_path.read_text())["sequences"]:
         name, seq = entry["name"], open_sequence(entry["root"])
-        poses_path = labels_dir / name / "poses_vo.txt"
-        poses = read_poses(poses_path, len(seq)) if poses_path.is_file() else seq.poses
+        made_from = [labels_dir / name / f for f in ("poses_vo.txt", "poses.txt") if (labels_dir / name / f).is_file()]
+        poses = read_poses(made_from[0], len(seq)) if made_from else seq.poses
         out.append(LabelledSequence(name, seq, labels_dir / name, poses))
     return out

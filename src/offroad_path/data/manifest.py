@@ -16,10 +16,10 @@ class Sample:
     mirrored: bool  # flip image, label, disparity and semantic map left-right when loading
     image: str
     label: str
-    disparity: str  # KITTI format: uint16 of 256 x disparity, 0 unknown
+    disparity: str  # KITTI format: uint16 of 256 x disparity, 0 unknown; empty for a recording of one camera
     semantic: str  # class ids 0..7; empty for real recordings
     fx: float
-    baseline_m: float
+    baseline_m: float  # 0 for one camera
 
 
 COLUMNS = [f.name for f in fields(Sample)]

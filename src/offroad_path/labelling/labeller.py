@@ -1,5 +1,6 @@
-"""Label one stereo sequence: poses (stereo VO or a file), frame selection, footprint labels,
-f0 disparity, and a report of every segment, kept or dropped and why."""
+"""Label one sequence: poses (stereo VO or a file), frame selection, footprint labels, f0 disparity,
+and a report of every segment, kept or dropped and why. A mono sequence (one camera) is labelled
+from a pose file, without occlusion and without disparity: both need the right image."""
 
 from __future__ import annotations
 
@@ -55,6 +56,8 @@ def pose_file(seq: Sequence, cfg) -> Path:
 def check_inputs(seq: Sequence, cfg) -> None:
     """What label_sequence needs besides the images, checked before any work: footprint and poses."""
     footprint_for(seq, cfg.footprint)
+    if cfg.poses.source == "vo":
+        seq.require_stereo("the stereo odometry (label.poses.source=vo; give poses.txt and label.poses.source=file)")
     if cfg.poses.source == "file":
         read_poses(pose_file(seq, cfg), expected_rows=len(seq))
 
@@ -68,9 +71,10 @@ def poses_for(seq: Sequence, cfg) -> tuple[np.ndarray, OdometryRun | None]:
     raise ValueError(f"unknown label.poses.source {cfg.poses.source!r}; valid: {', '.join(POSE_SOURCES)}")
 
 
-def measured_depth(seq: Sequence, f0: int, disparity: np.ndarray, cfg) -> np.ndarray:
+def measured_depth(seq: Sequence, f0: int, disparity: np.ndarray | None, cfg) -> np.ndarray:
     """Depth seen at f0 for the occlusion test: from stereo, or the renderer's exact depth."""
     if cfg.depth == "stereo":
+        seq.require_stereo("occlusion from stereo depth (label.occlusion.depth=stereo)")
         return depth_from_disparity(disparity, seq.calibration.fx, seq.calibration.baseline_m)
     if cfg.depth == "ground_truth":
         return seq.load_depth(f0)
@@ -85,8 +89,10 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     travelled = distance_along(positions)
     matcher = sgbm(cfg.disparity)
     K, size = seq.calibration.K, seq.image_size
+    occlusion_cfg = cfg.occlusion
+    occluding = occlusion_cfg.enabled and not seq.mono  # one camera: no depth to test occlusion by (label.py says so)
     out_dir.mkdir()  # not parents: a worker must not re-create a stopped run's temporary folder
-    for sub in ("label", "disparity"):
+    for sub in ("label",) if seq.mono else ("label", "disparity"):
         (out_dir / sub).mkdir()
 
     reports = []
@@ -97,11 +103,10 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         if run is not None and not odometry_holds(run, report):
             reports.append(report)
             continue
-        disparity = compute_disparity(matcher, seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
-        occlusion_cfg = cfg.occlusion
+        disparity = None if seq.mono else compute_disparity(matcher, seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
         occlusion = (
             Occlusion(measured_depth(seq, f0, disparity, occlusion_cfg), occlusion_cfg.margin_m, occlusion_cfg.margin_rel)
-            if occlusion_cfg.enabled
+            if occluding
             else None
         )
         mask = path_mask(footprint_depth(swept_polygons(poses, f0, fn, footprint), K, size), occlusion)
@@ -111,7 +116,8 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         else:
             name = f"{f0:06d}.png"
             write_image(out_dir / "label" / name, mask)
-            write_image(out_dir / "disparity" / name, encode_disparity(disparity))
+            if disparity is not None:
+                write_image(out_dir / "disparity" / name, encode_disparity(disparity))
         reports.append(report)
 
     _write_csv(out_dir / "report.csv", [asdict(r) for r in reports], [f.name for f in fields(SegmentReport)])
@@ -126,7 +132,11 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         "drift": None,
         "warnings": [],
     }
-    if run is not None:
+    if seq.mono:  # only then: a stereo run's summary keeps its bytes
+        summary["one_camera"] = True
+    if run is None:  # the poses the labels were made from, beside them (label.poses.file may be a pattern)
+        (out_dir / "poses.txt").write_text(poses_to_text(poses))
+    else:
         summary |= write_odometry(out_dir, run, seq, cfg.distance_m, cfg.odometry.disparity_offset_warn_px)
     if not reports:
         summary["warnings"].append(

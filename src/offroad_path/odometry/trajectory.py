@@ -44,6 +44,7 @@ def run_odometry(sequence: Sequence, cfg: OdometryConfig) -> OdometryRun:
     """Poses of every frame of `sequence` by the estimator cfg.method names."""
     if cfg.method not in ESTIMATORS:
         raise ValueError(f"unknown label.odometry.method {cfg.method!r}; valid: {', '.join(ESTIMATORS)}")
+    sequence.require_stereo("the stereo odometry and its disparity offset")
     vo = ESTIMATORS[cfg.method](sequence.calibration, cfg)
     vo.start(sequence.load_left(0, grey=True), sequence.load_right(0, grey=True))
     for k in range(1, len(sequence)):

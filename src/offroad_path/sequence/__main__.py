@@ -1,7 +1,9 @@
-"""Check stereo recordings before labelling them: `python -m offroad_path.sequence PATH [PATH ...]`.
+"""Check recordings before labelling them: `python -m offroad_path.sequence PATH [PATH ...]`.
 
 Opens every sequence under each PATH with the same validation the label stage uses, decodes every
-frame, and prints one line per sequence. Bad input: one line naming the file, exit 2.
+frame, and prints one line per sequence: stereo pairs, or one camera's frames (a mono sequence,
+which the label stage labels from its poses file, without occlusion). Bad input: one line naming
+the file, exit 2.
 """
 
 from __future__ import annotations
@@ -16,22 +18,26 @@ def describe(path: str) -> list[str]:
     for root in find_sequences(path):
         seq = open_sequence(root)
         for i in range(len(seq)):  # every frame: a truncated one in the middle must not pass
-            seq.load_left(i), seq.load_right(i)
+            seq.load_left(i)
+            if not seq.mono:
+                seq.load_right(i)
             if seq.depth is not None:
                 seq.load_depth(i)
             if seq.semantic is not None:
                 seq.load_semantic(i)
         w, h = seq.image_size
-        travelled = "no poses"
+        travelled = "no poses" + (": label it with label.poses.source=file label.poses.file=PATTERN" if seq.mono else "")
         if seq.poses is not None:
             travelled = f"{path_length(seq.poses):.1f} m of poses"
         extras = [
             name for name, value in (("depth", seq.depth), ("semantic", seq.semantic), ("steering", seq.steering)) if value is not None
         ]
-        lines.append(
-            f"{root}: {len(seq)} stereo pairs {w}x{h}, fx {seq.calibration.fx:.1f} px, "
-            f"baseline {seq.calibration.baseline_m:.3f} m, {travelled}" + (f", with {', '.join(extras)}" if extras else "")
+        cameras = (
+            f"{len(seq)} frames of one camera (mono: labelled from poses, without occlusion) {w}x{h}, fx {seq.calibration.fx:.1f} px"
+            if seq.mono
+            else f"{len(seq)} stereo pairs {w}x{h}, fx {seq.calibration.fx:.1f} px, baseline {seq.calibration.baseline_m:.3f} m"
         )
+        lines.append(f"{root}: {cameras}, {travelled}" + (f", with {', '.join(extras)}" if extras else ""))
     return lines
 
 

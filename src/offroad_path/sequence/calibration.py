@@ -1,4 +1,5 @@
-"""Rectified stereo calibration from `calib.txt`: two 3x4 projection matrices, unkeyed or KITTI-keyed."""
+"""Rectified stereo calibration from `calib.txt`: two 3x4 projection matrices, unkeyed or KITTI-keyed;
+one camera's recording may give only its own (left) matrix."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from offroad_path.errors import InputError
 @dataclass(frozen=True)
 class StereoCalibration:
     P_left: np.ndarray  # (3, 4)
-    P_right: np.ndarray  # (3, 4)
+    P_right: np.ndarray | None  # (3, 4); None: one camera
 
     @property
     def K(self) -> np.ndarray:
@@ -25,11 +26,14 @@ class StereoCalibration:
 
     @property
     def baseline_m(self) -> float:
-        """Distance from the left to the right camera centre, from P_right = K [I | -B e_x]."""
+        """Distance from the left to the right camera centre, from P_right = K [I | -B e_x]; 0 for one
+        camera (every depth from it is then 0, unknown)."""
+        if self.P_right is None:
+            return 0.0
         return float((self.P_left[0, 3] - self.P_right[0, 3]) / self.P_left[0, 0])
 
     def to_text(self) -> str:
-        return "".join(" ".join(f"{v:.12e}" for v in P.ravel()) + "\n" for P in (self.P_left, self.P_right))
+        return "".join(" ".join(f"{v:.12e}" for v in P.ravel()) + "\n" for P in (self.P_left, self.P_right) if P is not None)
 
     @classmethod
     def from_intrinsics(cls, K: np.ndarray, baseline_m: float) -> StereoCalibration:
@@ -39,8 +43,14 @@ class StereoCalibration:
         return cls(P_left, P_right)
 
 
-def read_calibration(path: Path, keys: tuple[str, str] | None) -> StereoCalibration:
-    """Parse and check a rectified stereo calib.txt; `keys` picks keyed rows (e.g. P2, P3)."""
+def read_calibration(path: Path, keys: tuple[str, str] | None, mono: bool = False) -> StereoCalibration:
+    """Parse and check a rectified stereo calib.txt; `keys` picks keyed rows (e.g. P2, P3). For a
+    `mono` recording one (left) row is enough; a second row is read and checked as for stereo."""
+    if mono and len(rows := _projection_rows(path, keys, mono)) == 1:
+        P_left = _matrix(path, rows[0], "left")
+        if P_left[0, 0] <= 0 or P_left[1, 1] <= 0:
+            raise InputError(path, "focal lengths must be positive")
+        return StereoCalibration(P_left, None)
     P_left, P_right = (_matrix(path, row, name) for row, name in zip(_projection_rows(path, keys), ("left", "right"), strict=True))
     calib = StereoCalibration(P_left, P_right)
     if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
@@ -52,9 +62,9 @@ def read_calibration(path: Path, keys: tuple[str, str] | None) -> StereoCalibrat
     return calib
 
 
-def _projection_rows(path: Path, keys: tuple[str, str] | None) -> list[str]:
+def _projection_rows(path: Path, keys: tuple[str, str] | None, mono: bool = False) -> list[str]:
     """The left and right rows of calib.txt: keyed ones (`keys`, else P0/P1 or P2/P3 when the file
-    has keys), or the file's two unkeyed rows."""
+    has keys), or the file's two unkeyed rows; for `mono`, the left row alone when that is all."""
     try:
         lines = [line.strip() for line in path.read_text().splitlines() if line.strip()]
     except (OSError, UnicodeDecodeError) as e:
@@ -68,6 +78,8 @@ def _projection_rows(path: Path, keys: tuple[str, str] | None) -> list[str]:
         else:
             unkeyed.append(line)
     if keys is None and not keyed:
+        if mono and len(unkeyed) == 1:
+            return unkeyed
         if len(unkeyed) != 2:
             raise InputError(path, f"must hold two rows of 12 numbers (P_left, P_right), found {len(unkeyed)} rows")
         return unkeyed
@@ -76,6 +88,8 @@ def _projection_rows(path: Path, keys: tuple[str, str] | None) -> list[str]:
         if keys is None:
             raise InputError(path, f"has keyed rows {sorted(keyed)} but neither P0/P1 nor P2/P3")
     missing = [k for k in keys if k not in keyed]
+    if mono and keys[0] in keyed and missing == [keys[1]]:
+        return [keyed[keys[0]]]
     if missing:
         raise InputError(path, f"lacks the row(s) {', '.join(missing)}")
     return [keyed[k] for k in keys]

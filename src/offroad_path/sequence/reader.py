@@ -1,4 +1,5 @@
-"""Reading stereo sequences: this project's layout (see docs/design.md) and KITTI's odometry layout.
+"""Reading recordings: this project's layout (see docs/design.md) and KITTI's odometry layout, stereo
+or one camera (no right folder: a mono sequence, labelled from poses that come from elsewhere).
 
 Everything is validated on opening, so that a later stage never meets a half-good sequence:
 every error names the file and says what is wrong with it.
@@ -28,7 +29,7 @@ LAYOUTS = (("image_l", "image_r", None), ("image_2", "image_3", ("P2", "P3")), (
 class Sequence:
     root: Path
     left: list[Path]
-    right: list[Path]
+    right: list[Path] | None  # None: one camera (a mono sequence)
     calibration: StereoCalibration
     image_size: tuple[int, int]  # (width, height)
     poses: np.ndarray | None = None  # (N, 4, 4) left camera to world
@@ -49,7 +50,17 @@ class Sequence:
     def load_left(self, i: int, grey: bool = False) -> np.ndarray:
         return read_image(self.left[i], grey)
 
+    @property
+    def mono(self) -> bool:
+        return self.right is None
+
+    def require_stereo(self, what: str) -> None:
+        """InputError naming the missing right images when this sequence has one camera."""
+        if self.right is None:
+            raise InputError(self.root, f"has one camera (no right images): {what} needs a stereo pair")
+
     def load_right(self, i: int, grey: bool = False) -> np.ndarray:
+        self.require_stereo("the right image")
         return read_image(self.right[i], grey)
 
     def load_depth(self, i: int) -> np.ndarray:
@@ -117,9 +128,10 @@ def open_sequence(root: str | Path) -> Sequence:
     if layout is None:
         raise InputError(root, "has no image_l/, image_2/ or image_0/ folder of left images")
     left_dir, right_dir, keys = layout
-    calibration = read_calibration(calib_path, keys)
-    left, right = _stereo_pairs(root / left_dir, root / right_dir)
-    image_size = _common_size(left + right)
+    mono = not (root / right_dir).is_dir()
+    calibration = read_calibration(calib_path, keys, mono=mono)
+    left, right = (_left_images(root / left_dir), None) if mono else _stereo_pairs(root / left_dir, root / right_dir)
+    image_size = _common_size(left + (right or []))
     n = len(left)
 
     poses_path = _find_poses(root)
@@ -132,12 +144,15 @@ def open_sequence(root: str | Path) -> Sequence:
     return Sequence(root, left, right, calibration, image_size, poses, poses_path, times, meta, depth, semantic, steering)
 
 
-def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Path]]:
+def _left_images(left_dir: Path) -> list[Path]:
     left = sorted(left_dir.glob("*.png"))
     if not left:
         raise InputError(left_dir, "holds no PNG images")
-    if not right_dir.is_dir():
-        raise InputError(right_dir, "is missing: a stereo sequence needs right images")
+    return left
+
+
+def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Path]]:
+    left = _left_images(left_dir)
     right = sorted(right_dir.glob("*.png"))
     left_names = [p.name for p in left]
     right_names = [p.name for p in right]

@@ -1,6 +1,7 @@
 """Initialising a network before training: from the pretrain stage (8-class semantic
-segmentation, then a new 2-class head, as the thesis did) or from VGG16(-BN) ImageNet weights
-in torchvision's state-dict layout, read from a local file (nothing is downloaded)."""
+segmentation, then a new 2-class head, as the thesis did), from a path network the train stage
+made on the world (fine-tuning on your own driving: every layer), or from VGG16(-BN) ImageNet
+weights in torchvision's state-dict layout, read from a local file (nothing is downloaded)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from torch import nn
 from offroad_path.models import FCN8s, SegmentationNet, SegNet, UNet
 from offroad_path.training.checkpoints import CheckpointError, load_checkpoint
 
-CHOICES = ("none", "segmentation", "imagenet")
+CHOICES = ("none", "segmentation", "world", "imagenet")
 
 
 def initialise(model: SegmentationNet, name: str, cfg, arch: str, width: float) -> list[str]:
@@ -21,22 +22,29 @@ def initialise(model: SegmentationNet, name: str, cfg, arch: str, width: float) 
         return []
     if name == "segmentation":
         return from_segmentation(model, Path(cfg.checkpoint), arch, width)
+    if name == "world":
+        return from_path_network(model, Path(cfg.checkpoint), arch, width)
     if name == "imagenet":
         return from_imagenet_vgg(model, Path(cfg.weights_path) if cfg.weights_path else None)
     raise ValueError(f"unknown pretraining {name!r}; valid: {', '.join(CHOICES)}")
 
 
-def from_segmentation(model: SegmentationNet, checkpoint: Path, arch: str, width: float) -> list[str]:
-    """Load a pretrain-stage checkpoint of the same architecture, then give it `model`'s head."""
+def _same_network(checkpoint: Path, arch: str, width: float, made_by: str) -> tuple[dict, dict]:
+    """The hyper-parameters and the network's weights of a checkpoint of `arch` at `width`."""
     if not checkpoint.is_file():
-        raise FileNotFoundError(f"{checkpoint}: no pretraining checkpoint; run `python -m offroad_path.pretrain model={arch}` first")
+        raise FileNotFoundError(f"{checkpoint}: no checkpoint there; run `{made_by}` first (or give pretraining.checkpoint)")
     saved = load_checkpoint(checkpoint)
     hp = saved["hyper_parameters"]
     if hp.get("model") != arch or hp.get("width") != width:
         raise ValueError(
             f"{checkpoint}: holds a {hp.get('model')} of width {hp.get('width')}, not the {arch} of width {width} being trained"
         )
-    state = {k.removeprefix("model."): v for k, v in saved["state_dict"].items() if k.startswith("model.")}
+    return hp, {k.removeprefix("model."): v for k, v in saved["state_dict"].items() if k.startswith("model.")}
+
+
+def from_segmentation(model: SegmentationNet, checkpoint: Path, arch: str, width: float) -> list[str]:
+    """Load a pretrain-stage checkpoint of the same architecture, then give it `model`'s head."""
+    hp, state = _same_network(checkpoint, arch, width, f"python -m offroad_path.pretrain model={arch}")
     num_classes = model.num_classes
     model.replace_head(hp["num_classes"])
     try:
@@ -46,6 +54,21 @@ def from_segmentation(model: SegmentationNet, checkpoint: Path, arch: str, width
     model.replace_head(num_classes)
     head = set(model.head_parameters())
     return [k for k in state if k not in head]
+
+
+def from_path_network(model: SegmentationNet, checkpoint: Path, arch: str, width: float) -> list[str]:
+    """Load every layer, the head too, of a train-stage path network of the same architecture."""
+    hp, state = _same_network(checkpoint, arch, width, f"python -m offroad_path.train model={arch}")
+    if hp.get("num_classes") != model.num_classes:
+        raise ValueError(
+            f"{checkpoint}: holds a {hp.get('num_classes')}-class network (a pretrain-stage checkpoint?), "
+            f"not a {model.num_classes}-class path network from the train stage"
+        )
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as e:
+        raise CheckpointError(f"{checkpoint}: its weights do not fit a {arch} ({str(e).strip().splitlines()[0]})") from e
+    return list(state)
 
 
 def _vgg_state(path: Path | None) -> dict:

@@ -1,0 +1,257 @@
+"""How much real driving a path network needs (issue 45): test IoU on a held-out stretch of a real
+drive against the number of real training frames, from random weights and from the world-trained
+network of the same architecture (pretraining=world), three seeds each.
+
+    python benchmarks/few_shot.py [--model fcn] [--sizes 0 20 40 80 all] [--seeds 0 1 2] [--steps 300]
+        [--recording ../shared/data/kitti00_mono] [--other ../shared/data/kitti_seq1] [--json out.json]
+
+Run after `dvc repro` (pretraining=world reads data/runs/<model>-none/seed<k>/checkpoints/best.ckpt).
+Both KITTI drives are labelled by the label stage from their true poses, occlusion off (kitti00_mono
+has one camera), every frame an f0 (label.stride_m=0.5). The test set is the held-out stretch of
+kitti00_mono whose f0 lies 45-75 m along the drive: straight road, then the approach to the right
+turn, so its labels bend two ways and the label-centred gain is defined. Training frames: the rest
+of kitti00_mono at least `split.guard_m` (10 m) from that stretch, and every labelled frame of
+kitti_seq1 (another drive), drawn per seed as nested subsets (a seed's 20 are among its 40). Every
+run is the train stage itself (mirrored copies, its augmentation) for the same number of optimiser
+steps whatever the number of frames, and keeps its last weights (no validation set to choose by).
+
+Columns: IoU against each test frame's own label and against the other test frames' labels (the
+shuffled control: a network that paints one path for every image scores the same on both), the
+label-centred gain and the far-end correlation (evaluation/real.py), and world minus random
+weights paired on the same draws; the control row fine-tunes on all frames with their labels
+shuffled among the frames. Intervals: 95 % bootstrap over the test stretch's 10 m blocks and the
+three seeds. Writes docs/images/few_shot.png with --figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from transfer_real import label_recording  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+TEST_M = (45.0, 75.0)  # the held-out stretch of kitti00_mono: its f0 lie this far along the drive
+BLOCK_M = 10.0  # the bootstrap's blocks of driving inside it
+
+
+def pools(recording: Path, other: Path, work: Path, guard_m: float):
+    """Label both drives; (test frames, training samples) of kitti00_mono's held-out stretch and the rest."""
+    from offroad_path.config import load_config
+    from offroad_path.evaluation.real import RealFrames
+    from offroad_path.split import labelled_frames
+
+    cfg = load_config()
+    train, test_keys = [], []
+    for drive in (recording, other):
+        labels = label_recording(drive, work / f"labels_{drive.name}", "label.stride_m=0.5")
+        frames, samples = labelled_frames(labels)
+        for frame in frames:
+            sample = samples[(frame.sequence, frame.f0)]
+            inside = drive == recording and TEST_M[0] <= frame.travelled_m < TEST_M[1]
+            near = drive == recording and TEST_M[0] - guard_m <= frame.travelled_m < TEST_M[1] + guard_m
+            if inside:
+                test_keys.append((frame.sequence, frame.f0))
+            elif not near:
+                train.append(sample)
+        if drive == recording:
+            everything = RealFrames.read(labels, BLOCK_M, cfg.label.distance_m)
+            test_samples = [samples[key] for key in test_keys]
+    keep = [everything.groups.index(key) for key in test_keys]
+    test = replace(
+        everything,
+        images=[everything.images[i] for i in keep],
+        labels=everything.labels[keep],
+        groups=[everything.groups[i] for i in keep],
+        blocks=[everything.blocks[i] for i in keep],
+        direction=[everything.direction[i] for i in keep],
+    )
+    return test, test_samples, train
+
+
+def write_split(folder: Path, train: list, test: list) -> Path:
+    from offroad_path.data.manifest import Sample, write_manifest
+
+    folder.mkdir(parents=True)
+    write_manifest(folder / "train.csv", [s for sample in train for s in (sample, Sample(**{**asdict(sample), "mirrored": True}))])
+    write_manifest(folder / "val.csv", [])
+    write_manifest(folder / "test.csv", test)
+    return folder
+
+
+def fine_tune(split: Path, out: Path, model: str, init: str, seed: int, steps: int) -> Path:
+    """The train stage on `split` for `steps` optimiser steps; the checkpoint it keeps."""
+    from offroad_path.config import load_config
+    from offroad_path.train import train
+
+    world = ROOT / "data" / "runs" / f"{model}-none" / f"seed{seed}" / "checkpoints" / "best.ckpt"
+    cfg = load_config(
+        f"model={model}",
+        f"pretraining={init}",
+        *([f"pretraining.checkpoint={world}"] if init == "world" else []),
+        f"data.split_dir={split}",
+        f"train.out_dir={out}",
+        f"seed={seed}",
+        f"train.max_steps={steps}",
+        "trainer.max_epochs=10000",
+        "train.sample_images=0",
+        "resume=false",
+        "mlflow.enabled=false",
+    )
+    train(cfg)
+    return out / "checkpoints" / "best.ckpt"
+
+
+def predict(checkpoints: list[Path], images: list[np.ndarray]) -> np.ndarray:
+    from offroad_path.inference.runners import TorchModel
+
+    return np.stack([TorchModel(path).predict_all(images) > 0.5 for path in checkpoints])  # (S, N, H, W)
+
+
+def curve(args) -> dict:
+    from offroad_path.config import load_config
+    from offroad_path.data.manifest import Sample
+    from offroad_path.evaluation.bootstrap import Resampling, block_sums, paired_interval
+    from offroad_path.evaluation.metrics import counts
+    from offroad_path.evaluation.real import real_row
+    from offroad_path.evaluation.scores import iou
+
+    cfg = load_config()
+    resampling = Resampling(cfg.evaluate.bootstrap.resamples, cfg.evaluate.bootstrap.seed)
+    work = Path(tempfile.mkdtemp(prefix="few-shot-")) if args.work is None else args.work
+    test, test_samples, pool = pools(args.recording, args.other, work, cfg.split.guard_m)
+    sizes = [len(pool) if s == "all" else int(s) for s in args.sizes]
+    if max(sizes) > len(pool):
+        raise SystemExit(f"{max(sizes)} training frames asked for, the pool holds {len(pool)}")
+    bends = np.bincount(np.array(test.direction) + 1, minlength=3).tolist()
+    print(f"test: {len(test.labels)} frames of {args.recording.name} ({bends} bending left, straight, right), "
+          f"{len(set(test.blocks))} blocks; training pool: {len(pool)} frames", flush=True)
+    orders = {seed: np.random.default_rng(seed).permutation(len(pool)) for seed in args.seeds}
+    runs: dict[tuple[str, int], list[Path]] = {}
+    started = time.perf_counter()
+    for size in sizes:
+        for init in ("none", "world"):
+            if size == 0 and init == "none":
+                continue  # random weights, never trained: nothing to measure
+            runs[init, size] = []
+            for seed in args.seeds:
+                if size == 0:
+                    runs[init, size].append(ROOT / "data" / "runs" / f"{args.model}-none" / f"seed{seed}" / "checkpoints" / "best.ckpt")
+                    continue
+                chosen = [pool[i] for i in orders[seed][:size]]
+                name = f"{init}-{size}-seed{seed}"
+                split = write_split(work / "splits" / name, chosen, test_samples)
+                runs[init, size].append(fine_tune(split, work / "runs" / name, args.model, init, seed, args.steps))
+                print(f"  {name}: {time.perf_counter() - started:.0f} s", flush=True)
+    if args.shuffled:
+        runs["shuffled", len(pool)] = []
+        for seed in args.seeds:
+            labels = [s.label for s in pool]
+            permuted = np.random.default_rng(1000 + seed).permutation(len(pool))
+            shuffled = [Sample(**{**asdict(s), "label": labels[j]}) for s, j in zip(pool, permuted, strict=True)]
+            name = f"shuffled-seed{seed}"
+            split = write_split(work / "splits" / name, shuffled, test_samples)
+            runs["shuffled", len(pool)].append(fine_tune(split, work / "runs" / name, args.model, "world", seed, args.steps))
+            print(f"  {name}: {time.perf_counter() - started:.0f} s", flush=True)
+
+    predicted = {key: predict(paths, test.images) for key, paths in runs.items()}
+    sums = {key: block_sums(np.stack([counts(p.astype(np.float32), test.labels) for p in seeds]), test.blocks) for key, seeds in predicted.items()}
+    rows = []
+    for (init, size), seeds in predicted.items():
+        row = asdict(real_row(f"{init} {size}", seeds, test, resampling))
+        if init == "world" and ("none", size) in sums:
+            difference = paired_interval(sums[init, size], sums["none", size], iou, resampling)
+            row |= {"world_minus_none": difference.estimate, "world_minus_none_low": difference.low, "world_minus_none_high": difference.high}
+        rows.append({"init": init, "frames": size, **row})
+    return {
+        "model": args.model,
+        "steps": args.steps,
+        "seeds": list(args.seeds),
+        "test_frames": len(test.labels),
+        "test_blocks": len(set(test.blocks)),
+        "test_bends_left_straight_right": bends,
+        "pool_frames": len(pool),
+        "seconds": round(time.perf_counter() - started),
+        "rows": rows,
+    }
+
+
+def table(result: dict) -> str:
+    lines = [
+        "| initialisation | real training frames | IoU [95 %] | vs other frames' labels | label-centred gain [95 %] | "
+        "far-end correlation [95 %] | world minus random [95 %] |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in result["rows"]:
+        paired = (
+            f"{r['world_minus_none']:+.3f} [{r['world_minus_none_low']:+.3f}, {r['world_minus_none_high']:+.3f}]"
+            if "world_minus_none" in r
+            else ""
+        )
+        lines.append(
+            f"| {r['init']} | {r['frames']} | {r['iou']:.3f} [{r['iou_low']:.3f}, {r['iou_high']:.3f}] | {r['non_corresponding_iou']:.3f} | "
+            f"{r['gain']:+.3f} [{r['gain_low']:+.3f}, {r['gain_high']:+.3f}] | "
+            f"{r['far_end']:+.2f} [{r['far_end_low']:+.2f}, {r['far_end_high']:+.2f}] | {paired} |"
+        )
+    return "\n".join(lines)
+
+
+def figure(result: dict, path: Path) -> None:
+    """Test IoU against real training frames, both initialisations and the control, with 95 % intervals."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.8), dpi=120)
+    styles = {"none": ("random weights", "o-"), "world": ("from the world (pretraining=world)", "s-"), "shuffled": ("world, labels shuffled", "x")}
+    for init, (title, style) in styles.items():
+        rows = sorted((r for r in result["rows"] if r["init"] == init), key=lambda r: r["frames"])
+        if rows:
+            x = np.array([r["frames"] for r in rows]) + {"none": -1.0, "world": 1.0, "shuffled": 0.0}[init]
+            y = np.array([r["iou"] for r in rows])
+            err = np.array([[r["iou"] - r["iou_low"] for r in rows], [r["iou_high"] - r["iou"] for r in rows]])
+            ax.errorbar(x, y, yerr=err, fmt=style, capsize=3, label=title)
+    ax.set_xlabel("real training frames")
+    ax.set_ylabel("test IoU, held-out stretch")
+    ax.set_title(f"{result['model']} on kitti00_mono, {len(result['seeds'])} seeds, 95 % intervals", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--recording", type=Path, default=ROOT.parent / "shared/data/kitti00_mono")
+    parser.add_argument("--other", type=Path, default=ROOT.parent / "shared/data/kitti_seq1")
+    parser.add_argument("--model", default="fcn")
+    parser.add_argument("--sizes", nargs="+", default=["0", "20", "40", "80", "all"])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    parser.add_argument("--steps", type=int, default=300)
+    parser.add_argument("--no-shuffled", dest="shuffled", action="store_false", help="skip the shuffled-label control")
+    parser.add_argument("--work", type=Path, default=None, help="keep labels, splits and runs here (default: a temporary folder)")
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--figure", type=Path, default=None, help="e.g. docs/images/few_shot.png")
+    args = parser.parse_args()
+    for drive in (args.recording, args.other):
+        if not (drive / "poses.txt").is_file():
+            sys.exit(f"{drive}: not found (a recording with poses.txt); nothing measured")
+    result = curve(args)
+    print(table(result))
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+    if args.figure:
+        figure(result, args.figure)
+
+
+if __name__ == "__main__":
+    main()
