@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from transfer_real import label_recording  # noqa: E402
+from transfer_real import label_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_M = (45.0, 75.0)  # the held-out stretch of kitti00_mono: its f0 lie this far along the drive
@@ -87,20 +87,19 @@ def write_split(folder: Path, train: list, test: list) -> Path:
     return folder
 
 
-def fine_tune(split: Path, out: Path, model: str, init: str, seed: int, steps: int) -> Path:
-    """The train stage on `split` for `steps` optimiser steps; the checkpoint it keeps."""
+def fine_tune(split: Path, out: Path, args: argparse.Namespace, init: str, seed: int) -> Path:
+    """The train stage on `split` for args.steps optimiser steps; the checkpoint it keeps."""
     from offroad_path.config import load_config
     from offroad_path.train import train
 
-    world = ROOT / "data" / "runs" / f"{model}-none" / f"seed{seed}" / "checkpoints" / "best.ckpt"
     cfg = load_config(
-        f"model={model}",
+        f"model={args.model}",
         f"pretraining={init}",
-        *([f"pretraining.checkpoint={world}"] if init == "world" else []),
+        *([f"pretraining.checkpoint={world_checkpoint(args.model, seed)}"] if init == "world" else []),
         f"data.split_dir={split}",
         f"train.out_dir={out}",
         f"seed={seed}",
-        f"train.max_steps={steps}",
+        f"train.max_steps={args.steps}",
         "trainer.max_epochs=10000",
         "train.sample_images=0",
         "resume=false",
@@ -108,6 +107,10 @@ def fine_tune(split: Path, out: Path, model: str, init: str, seed: int, steps: i
     )
     train(cfg)
     return out / "checkpoints" / "best.ckpt"
+
+
+def world_checkpoint(model: str, seed: int) -> Path:
+    return ROOT / "data" / "runs" / f"{model}-none" / f"seed{seed}" / "checkpoints" / "best.ckpt"
 
 
 def predict(checkpoints: list[Path], images: list[np.ndarray]) -> np.ndarray:
@@ -118,7 +121,6 @@ def predict(checkpoints: list[Path], images: list[np.ndarray]) -> np.ndarray:
 
 def curve(args) -> dict:
     from offroad_path.config import load_config
-    from offroad_path.data.manifest import Sample
     from offroad_path.evaluation.bootstrap import Resampling, block_sums, paired_interval
     from offroad_path.evaluation.metrics import counts
     from offroad_path.evaluation.real import real_row
@@ -132,44 +134,23 @@ def curve(args) -> dict:
     if max(sizes) > len(pool):
         raise SystemExit(f"{max(sizes)} training frames asked for, the pool holds {len(pool)}")
     bends = np.bincount(np.array(test.direction) + 1, minlength=3).tolist()
-    print(f"test: {len(test.labels)} frames of {args.recording.name} ({bends} bending left, straight, right), "
-          f"{len(set(test.blocks))} blocks; training pool: {len(pool)} frames", flush=True)
-    orders = {seed: np.random.default_rng(seed).permutation(len(pool)) for seed in args.seeds}
-    runs: dict[tuple[str, int], list[Path]] = {}
-    started = time.perf_counter()
-    for size in sizes:
-        for init in ("none", "world"):
-            if size == 0 and init == "none":
-                continue  # random weights, never trained: nothing to measure
-            runs[init, size] = []
-            for seed in args.seeds:
-                if size == 0:
-                    runs[init, size].append(ROOT / "data" / "runs" / f"{args.model}-none" / f"seed{seed}" / "checkpoints" / "best.ckpt")
-                    continue
-                chosen = [pool[i] for i in orders[seed][:size]]
-                name = f"{init}-{size}-seed{seed}"
-                split = write_split(work / "splits" / name, chosen, test_samples)
-                runs[init, size].append(fine_tune(split, work / "runs" / name, args.model, init, seed, args.steps))
-                print(f"  {name}: {time.perf_counter() - started:.0f} s", flush=True)
-    if args.shuffled:
-        runs["shuffled", len(pool)] = []
-        for seed in args.seeds:
-            labels = [s.label for s in pool]
-            permuted = np.random.default_rng(1000 + seed).permutation(len(pool))
-            shuffled = [Sample(**{**asdict(s), "label": labels[j]}) for s, j in zip(pool, permuted, strict=True)]
-            name = f"shuffled-seed{seed}"
-            split = write_split(work / "splits" / name, shuffled, test_samples)
-            runs["shuffled", len(pool)].append(fine_tune(split, work / "runs" / name, args.model, "world", seed, args.steps))
-            print(f"  {name}: {time.perf_counter() - started:.0f} s", flush=True)
-
+    print(
+        f"test: {len(test.labels)} frames of {args.recording.name} ({bends} bending left, straight, right), "
+        f"{len(set(test.blocks))} blocks; training pool: {len(pool)} frames",
+        flush=True,
+    )
+    runs = train_runs(args, pool, test_samples, work, sizes)
     predicted = {key: predict(paths, test.images) for key, paths in runs.items()}
-    sums = {key: block_sums(np.stack([counts(p.astype(np.float32), test.labels) for p in seeds]), test.blocks) for key, seeds in predicted.items()}
+    sums = {
+        key: block_sums(np.stack([counts(p.astype(np.float32), test.labels) for p in seeds]), test.blocks)
+        for key, seeds in predicted.items()
+    }  # (S, B, 4)
     rows = []
     for (init, size), seeds in predicted.items():
         row = asdict(real_row(f"{init} {size}", seeds, test, resampling))
         if init == "world" and ("none", size) in sums:
-            difference = paired_interval(sums[init, size], sums["none", size], iou, resampling)
-            row |= {"world_minus_none": difference.estimate, "world_minus_none_low": difference.low, "world_minus_none_high": difference.high}
+            paired = paired_interval(sums[init, size], sums["none", size], iou, resampling)
+            row |= {"world_minus_none": paired.estimate, "world_minus_none_low": paired.low, "world_minus_none_high": paired.high}
         rows.append({"init": init, "frames": size, **row})
     return {
         "model": args.model,
@@ -179,9 +160,44 @@ def curve(args) -> dict:
         "test_blocks": len(set(test.blocks)),
         "test_bends_left_straight_right": bends,
         "pool_frames": len(pool),
-        "seconds": round(time.perf_counter() - started),
         "rows": rows,
     }
+
+
+def shuffled_labels(samples: list, rng: np.random.Generator) -> list:
+    """The samples with their labels permuted among the frames of the same recording (one image size)."""
+    from offroad_path.data.manifest import Sample
+
+    out = list(samples)
+    for sequence in sorted({s.sequence for s in samples}):
+        index = [i for i, s in enumerate(samples) if s.sequence == sequence]
+        for i, j in zip(index, rng.permutation(index), strict=True):
+            out[i] = Sample(**{**asdict(samples[i]), "label": samples[j].label})
+    return out
+
+
+def train_runs(args: argparse.Namespace, pool: list, test_samples: list, work: Path, sizes: list[int]) -> dict[tuple[str, int], list[Path]]:
+    """The checkpoints of every (initialisation, frames), one per seed: 0 frames is the world network
+    itself; 'shuffled' fine-tunes the world network on every frame with the labels permuted."""
+    orders = {seed: np.random.default_rng(seed).permutation(len(pool)) for seed in args.seeds}
+    runs: dict[tuple[str, int], list[Path]] = {}
+    started = time.perf_counter()
+    cases = [(init, size) for size in sizes for init in ("none", "world") if size or init == "world"]  # random weights untrained: nothing
+    cases += [("shuffled", len(pool))] if args.shuffled else []
+    for init, size in cases:
+        runs[init, size] = []
+        for seed in args.seeds:
+            if size == 0:
+                runs[init, size].append(world_checkpoint(args.model, seed))
+                continue
+            chosen = [pool[i] for i in orders[seed][:size]]
+            if init == "shuffled":
+                chosen = shuffled_labels(chosen, np.random.default_rng(1000 + seed))
+            name = f"{init}-{size}-seed{seed}"
+            split = write_split(work / "splits" / name, chosen, test_samples)
+            runs[init, size].append(fine_tune(split, work / "runs" / name, args, "world" if init == "shuffled" else init, seed))
+            print(f"  {name}: {time.perf_counter() - started:.0f} s", flush=True)
+    return runs
 
 
 def table(result: dict) -> str:
@@ -197,7 +213,8 @@ def table(result: dict) -> str:
             else ""
         )
         lines.append(
-            f"| {r['init']} | {r['frames']} | {r['iou']:.3f} [{r['iou_low']:.3f}, {r['iou_high']:.3f}] | {r['non_corresponding_iou']:.3f} | "
+            f"| {r['init']} | {r['frames']} | {r['iou']:.3f} [{r['iou_low']:.3f}, {r['iou_high']:.3f}] | "
+            f"{r['non_corresponding_iou']:.3f} | "
             f"{r['gain']:+.3f} [{r['gain_low']:+.3f}, {r['gain_high']:+.3f}] | "
             f"{r['far_end']:+.2f} [{r['far_end_low']:+.2f}, {r['far_end_high']:+.2f}] | {paired} |"
         )
@@ -212,7 +229,11 @@ def figure(result: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 3.8), dpi=120)
-    styles = {"none": ("random weights", "o-"), "world": ("from the world (pretraining=world)", "s-"), "shuffled": ("world, labels shuffled", "x")}
+    styles = {
+        "none": ("random weights", "o-"),
+        "world": ("from the world (pretraining=world)", "s-"),
+        "shuffled": ("world, labels shuffled", "x"),
+    }
     for init, (title, style) in styles.items():
         rows = sorted((r for r in result["rows"] if r["init"] == init), key=lambda r: r["frames"])
         if rows:

@@ -87,10 +87,6 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     poses, run = poses_for(seq, cfg)
     positions = poses[:, :3, 3]
     travelled = distance_along(positions)
-    matcher = sgbm(cfg.disparity)
-    K, size = seq.calibration.K, seq.image_size
-    occlusion_cfg = cfg.occlusion
-    occluding = occlusion_cfg.enabled and not seq.mono  # one camera: no depth to test occlusion by (label.py says so)
     out_dir.mkdir()  # not parents: a worker must not re-create a stopped run's temporary folder
     for sub in ("label",) if seq.mono else ("label", "disparity"):
         (out_dir / sub).mkdir()
@@ -100,24 +96,8 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
         report = SegmentReport(
             f0, fn, float(travelled[fn] - travelled[f0]), float(np.linalg.norm(positions[fn] - positions[f0])), None, None, True, "", 0
         )
-        if run is not None and not odometry_holds(run, report):
-            reports.append(report)
-            continue
-        disparity = None if seq.mono else compute_disparity(matcher, seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
-        occlusion = (
-            Occlusion(measured_depth(seq, f0, disparity, occlusion_cfg), occlusion_cfg.margin_m, occlusion_cfg.margin_rel)
-            if occluding
-            else None
-        )
-        mask = path_mask(footprint_depth(swept_polygons(poses, f0, fn, footprint), K, size), occlusion)
-        report.label_pixels = int(np.count_nonzero(mask))
-        if report.label_pixels == 0:
-            report.kept, report.reason = False, "the footprint falls outside the image"
-        else:
-            name = f"{f0:06d}.png"
-            write_image(out_dir / "label" / name, mask)
-            if disparity is not None:
-                write_image(out_dir / "disparity" / name, encode_disparity(disparity))
+        if run is None or odometry_holds(run, report):
+            label_segment(seq, report, swept_polygons(poses, f0, fn, footprint), cfg, out_dir)
         reports.append(report)
 
     _write_csv(out_dir / "report.csv", [asdict(r) for r in reports], [f.name for f in fields(SegmentReport)])
@@ -150,6 +130,28 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     for warning in summary["warnings"]:
         log.warning("%s: %s", seq.name, warning)
     return summary
+
+
+def label_segment(seq: Sequence, report: SegmentReport, polygons: list[np.ndarray], cfg, out_dir: Path) -> None:
+    """Write the segment's label (and f0's disparity, with stereo) into out_dir; fill the report's
+    label pixels, or drop it when the footprint falls outside the image. One camera: no disparity,
+    no occlusion (label.py says so)."""
+    f0, occlusion_cfg = report.f0, cfg.occlusion
+    disparity = None if seq.mono else compute_disparity(sgbm(cfg.disparity), seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
+    occlusion = (
+        Occlusion(measured_depth(seq, f0, disparity, occlusion_cfg), occlusion_cfg.margin_m, occlusion_cfg.margin_rel)
+        if occlusion_cfg.enabled and disparity is not None
+        else None
+    )
+    mask = path_mask(footprint_depth(polygons, seq.calibration.K, seq.image_size), occlusion)
+    report.label_pixels = int(np.count_nonzero(mask))
+    if report.label_pixels == 0:
+        report.kept, report.reason = False, "the footprint falls outside the image"
+        return
+    name = f"{f0:06d}.png"
+    write_image(out_dir / "label" / name, mask)
+    if disparity is not None:
+        write_image(out_dir / "disparity" / name, encode_disparity(disparity))
 
 
 def odometry_holds(run: OdometryRun, report: SegmentReport) -> bool:

@@ -45,8 +45,8 @@ class StereoCalibration:
 
 def read_calibration(path: Path, keys: tuple[str, str] | None, mono: bool = False) -> StereoCalibration:
     """Parse and check a rectified stereo calib.txt; `keys` picks keyed rows (e.g. P2, P3). For a
-    `mono` recording one (left) row is enough; a second row is read and checked as for stereo."""
-    if mono and len(rows := _projection_rows(path, keys, mono)) == 1:
+    `mono` recording one unkeyed (left) row is enough; two rows are read and checked as for stereo."""
+    if mono and keys is None and len(rows := _lines(path)) == 1 and ":" not in rows[0]:
         P_left = _matrix(path, rows[0], "left")
         if P_left[0, 0] <= 0 or P_left[1, 1] <= 0:
             raise InputError(path, "focal lengths must be positive")
@@ -62,13 +62,17 @@ def read_calibration(path: Path, keys: tuple[str, str] | None, mono: bool = Fals
     return calib
 
 
-def _projection_rows(path: Path, keys: tuple[str, str] | None, mono: bool = False) -> list[str]:
-    """The left and right rows of calib.txt: keyed ones (`keys`, else P0/P1 or P2/P3 when the file
-    has keys), or the file's two unkeyed rows; for `mono`, the left row alone when that is all."""
+def _lines(path: Path) -> list[str]:
     try:
-        lines = [line.strip() for line in path.read_text().splitlines() if line.strip()]
+        return [line.strip() for line in path.read_text().splitlines() if line.strip()]
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(path, f"cannot be read as text ({e})") from e
+
+
+def _projection_rows(path: Path, keys: tuple[str, str] | None) -> list[str]:
+    """The left and right rows of calib.txt: keyed ones (`keys`, else P0/P1 or P2/P3 when the file
+    has keys), or the file's two unkeyed rows."""
+    lines = _lines(path)
     keyed: dict[str, str] = {}
     unkeyed: list[str] = []
     for line in lines:
@@ -78,8 +82,6 @@ def _projection_rows(path: Path, keys: tuple[str, str] | None, mono: bool = Fals
         else:
             unkeyed.append(line)
     if keys is None and not keyed:
-        if mono and len(unkeyed) == 1:
-            return unkeyed
         if len(unkeyed) != 2:
             raise InputError(path, f"must hold two rows of 12 numbers (P_left, P_right), found {len(unkeyed)} rows")
         return unkeyed
@@ -88,8 +90,6 @@ def _projection_rows(path: Path, keys: tuple[str, str] | None, mono: bool = Fals
         if keys is None:
             raise InputError(path, f"has keyed rows {sorted(keyed)} but neither P0/P1 nor P2/P3")
     missing = [k for k in keys if k not in keyed]
-    if mono and keys[0] in keyed and missing == [keys[1]]:
-        return [keyed[keys[0]]]
     if missing:
         raise InputError(path, f"lacks the row(s) {', '.join(missing)}")
     return [keyed[k] for k in keys]
