@@ -127,12 +127,29 @@ class RosMessages:
             twist=g["geometry_msgs/msg/TwistWithCovariance"](twist=still, covariance=np.zeros(36)),
         )  # fmt: skip
 
+    def stamped(self, t: float, T: np.ndarray, parent: str, child: str):
+        g = self.types
+        q = Rotation.from_matrix(T[:3, :3]).as_quat()
+        transform = g["geometry_msgs/msg/Transform"](
+            translation=g["geometry_msgs/msg/Vector3"](x=T[0, 3], y=T[1, 3], z=T[2, 3]),
+            rotation=g["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+        )
+        return g["geometry_msgs/msg/TransformStamped"](header=self.header(t, parent), child_frame_id=child, transform=transform)
+
+    def transforms(self, t: float, T: np.ndarray):
+        """A /tf message: odom -> base_link (the pose), beside base_link -> camera (another frame's)."""
+        mount = np.eye(4)
+        mount[:3, 3] = (0.5, 0.0, 1.2)
+        stamped = [self.stamped(t, mount, "base_link", "camera"), self.stamped(t, T, "odom", "base_link")]
+        return self.types["tf2_msgs/msg/TFMessage"](transforms=stamped)
+
 
 def write_bag(path: Path, kind: str, frames: list, rig: RawRig, *, compressed: tuple[bool, bool] = (False, False),
               poses: np.ndarray | None = None, fps: float = 5.0, infos: bool = True, right_delay_s: float = 0.0,
-              right_frames: slice = slice(None), camera_infos: list[dict] | None = None) -> Path:  # fmt: skip
+              right_frames: slice = slice(None), camera_infos: list[dict] | None = None, pose_topic: str = "/odom") -> Path:  # fmt: skip
     """A ROS 1 bag (kind "ros1") or ROS 2 bag ("sqlite3", "mcap") of the raw frames, written with
-    rosbags: /stereo/{left,right}/image_raw (or .../compressed, PNG), their camera_info, /odom."""
+    rosbags: /stereo/{left,right}/image_raw (or .../compressed, PNG), their camera_info, and the
+    poses on /odom (nav_msgs/Odometry) or, with pose_topic="/tf", as TF transforms odom -> base_link."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as Writer2
@@ -152,7 +169,7 @@ def write_bag(path: Path, kind: str, frames: list, rig: RawRig, *, compressed: t
                     (t + delay + 0.001, f"/stereo/{side}/camera_info", ros.camera_info(t + delay, camera_infos[side == "right"], side))
                 )
         if poses is not None and i < len(poses):
-            messages.append((t, "/odom", ros.odometry(t, poses[i])))
+            messages.append((t, pose_topic, ros.transforms(t, poses[i]) if pose_topic == "/tf" else ros.odometry(t, poses[i])))
     storage = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
     with Writer1(path) if ros.ros1 else Writer2(path, version=9, storage_plugin=storage) as writer:
         connections = {}

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from raw_rig import body_poses, write_bag, write_videos
 
+from offroad_path.errors import InputError
 from offroad_path.ingest import ingest
 from offroad_path.label import label
 from offroad_path.recordings.calibration import CameraModel, StereoRig, rig_from_camera_infos, write_opencv
@@ -157,3 +158,49 @@ def test_two_videos_with_an_unknown_offset(compose_config, drive, rig, frames, i
     for k in (0, 30):  # pair k starts at left frame 3: the bag's frame k + 3
         ours = cv2.imread(str(tmp_path / "out" / "image_r" / f"{k:06d}.png")).astype(int)
         assert np.abs(ours - cv2.imread(str(ingested / "drive" / "image_r" / f"{k + 3:06d}.png"))).mean() < 6.0
+
+
+@pytest.mark.parametrize("kind", ["mcap", "sqlite3"])
+def test_a_bag_of_one_camera_and_tf_becomes_a_mono_sequence_that_labels(compose_config, drive, rig, frames, footprint, kind, tmp_path):
+    """ingest.mono (issue 45): the left camera alone (no right images in the bag) with its poses on
+    /tf; the sequence is the render seen through one undistorted pinhole camera, its poses the
+    render's, and the label stage labels it from them."""
+    from offroad_path.recordings.rectify import Undistorter
+
+    bag = write_bag(
+        tmp_path / f"mono_{kind}", kind, frames, rig, poses=body_poses(drive / "drive"), right_frames=slice(0), pose_topic="/tf"
+    )
+    source = [f"ingest.bag={bag}", "ingest.mono=true", f"ingest.topics.left={LEFT}", "ingest.topics.odometry=/tf"]
+    ingest(ingest_config(compose_config, source, tmp_path / "recordings" / "drive", *footprint, "mlflow.enabled=false"))
+    out = tmp_path / "recordings" / "drive"
+    assert not (out / "image_r").exists() and len((out / "calib.txt").read_text().splitlines()) == 1
+    seq, render = open_sequence(out), open_sequence(drive / "drive")
+    assert seq.mono and len(seq) == len(render) == 40 and seq.image_size == render.image_size
+    camera = rig_from_camera_infos(*rig.camera_infos(), drive).left
+    H = Undistorter(camera, rig.size, rig.size, 0.0).calibration.K @ np.linalg.inv(rig.K_render)  # same centre, same axes
+    np.testing.assert_allclose(seq.calibration.K, H @ rig.K_render, atol=1e-9)
+    for i in (0, 20, 39):
+        expected = cv2.warpPerspective(cv2.imread(str(render.left[i])), H, seq.image_size)
+        assert np.abs(expected.astype(int) - cv2.imread(str(seq.left[i]))).mean() < 2.0
+    assert seq.poses == pytest.approx(render.poses, abs=1e-6)  # the base_link transforms, not the camera mount's
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["images"] == 40 and meta["topics"] == {"left": LEFT, "odometry": "/tf"} and meta["epipolar_error_px"] is None
+    metrics = label(compose_config(f"label.in_dir={tmp_path / 'recordings'}", f"label.out_dir={tmp_path / 'labels'}",
+                                   f"label.metrics_path={tmp_path / 'm.json'}", "label.workers=1", "label.poses.source=file",
+                                   "mlflow.enabled=false"))  # fmt: skip
+    assert metrics["labels"] >= 8 and metrics["one_camera_sequences"] == 1
+
+
+def test_a_mono_ingest_without_poses_or_with_a_right_topic_is_refused(compose_config, drive, rig, frames, tmp_path):
+    bag = write_bag(tmp_path / "mono", "mcap", frames[:3], rig, poses=body_poses(drive / "drive")[:3], right_frames=slice(0))
+    base = [f"ingest.bag={bag}", "ingest.mono=true", f"ingest.topics.left={LEFT}"]
+    with pytest.raises(ValueError, match=r"ingest\.mono=true needs ingest\.topics\.odometry"):
+        ingest(ingest_config(compose_config, base, tmp_path / "out", "mlflow.enabled=false"))
+    with pytest.raises(ValueError, match=r"leave ingest\.topics\.right and ingest\.calibration unset"):
+        ingest(ingest_config(compose_config, [*base, "ingest.topics.odometry=/odom", f"ingest.topics.right={RIGHT}"], tmp_path / "out"))
+    from offroad_path.recordings.bags import Bag
+
+    tf = write_bag(tmp_path / "tf", "mcap", frames[:3], rig, poses=body_poses(drive / "drive")[:3], pose_topic="/tf")
+    with pytest.raises(InputError, match="/tf has no transform to the child frame nowhere"), Bag(tf) as opened:
+        opened.poses("/tf", "nowhere")
+    assert not (tmp_path / "out").exists()

@@ -85,11 +85,6 @@ BAD_INPUTS = {
     "calib one row": (lambda r: (r / "calib.txt").write_text(f"{K_ROW}\n"), "calib.txt", "two rows"),
     "no baseline": (lambda r: (r / "calib.txt").write_text(f"{K_ROW}\n{K_ROW}\n"), "calib.txt", "no baseline"),
     "right image missing": (lambda r: (r / "image_r" / "000002.png").unlink(), "image_r", "lacks 1 right image"),
-    "right folder missing": (
-        lambda r: [p.unlink() for p in (r / "image_r").iterdir()] and (r / "image_r").rmdir(),
-        "image_r",
-        "is missing",
-    ),
     "sizes differ": (
         lambda r: write_frames(r / "image_r", 1, size=(32, 32), start=1),
         "image_r/000001.png",

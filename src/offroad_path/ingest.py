@@ -5,12 +5,15 @@
         ingest.topics.right=/stereo/right/image_raw ingest.out_dir=data/recordings/drive
     python -m offroad_path.ingest ingest.videos.left=GOPR_L.MP4 ingest.videos.right=GOPR_R.MP4 \
         ingest.calibration=stereo.yaml ingest.fps=10 ingest.out_dir=data/recordings/gopro
+    python -m offroad_path.ingest ingest.bag=drive.bag ingest.mono=true ingest.topics.left=/camera/image_raw \
+        ingest.topics.odometry=/odometry/filtered   # one camera: poses from odometry or /tf
 
 Reads a ROS 1 bag, a ROS 2 bag (SQLite or MCAP) or an MCAP file through `rosbags`, or two video
 files with a calibration; pairs left and right by timestamp (or by the videos' estimated offset),
 rectifies with OpenCV at ingest.width x ingest.height, and writes the sequence layout of
-docs/design.md with a preview contact sheet. Everything is checked before anything is written;
-a failure leaves nothing behind.
+docs/design.md with a preview contact sheet. With ingest.mono=true, one camera's frames are
+undistorted (image_l/ only) and its poses come from the odometry topic (a mono sequence).
+Everything is checked before anything is written; a failure leaves nothing behind.
 """
 
 from __future__ import annotations
@@ -58,14 +61,16 @@ def ingest(cfg: DictConfig) -> dict:
     finally:
         source.close()
     epipolar = "not measurable" if meta["epipolar_error_px"] is None else f"{meta['epipolar_error_px']:.2f} px"
+    what = (
+        f"undistorted frames of one camera %dx%d (fx {meta['fx']:.1f} px)"
+        if ingest_cfg.mono
+        else f"rectified stereo pairs %dx%d (baseline {meta['baseline_m']:.3f} m, fx {meta['fx']:.1f} px, epipolar error {epipolar})"
+    )
     log.info(
-        "wrote %d rectified stereo pairs %dx%d (baseline %.3f m, fx %.1f px, epipolar error %s)%s to %s",
+        f"wrote %d {what}%s to %s",
         meta["frames"],
         ingest_cfg.width,
         ingest_cfg.height,
-        meta["baseline_m"],
-        meta["fx"],
-        epipolar,
         f", {meta['distance_m']:.1f} m of poses" if "distance_m" in meta else "",
         out_dir,
     )

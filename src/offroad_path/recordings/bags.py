@@ -1,5 +1,6 @@
 """ROS 1 bags, ROS 2 bags (SQLite or MCAP storage) and bare MCAP files, read with `rosbags`
-(pure Python: no ROS install): stereo image topics, their CameraInfo and an odometry topic."""
+(pure Python: no ROS install): stereo image topics (or one camera's), their CameraInfo and an
+odometry, pose or TF topic."""
 
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from offroad_path.sequence.reader import MAX_IMAGE_PIXELS
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 INFO_TYPE = "sensor_msgs/msg/CameraInfo"
-POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+TF_TYPE = "tf2_msgs/msg/TFMessage"  # /tf: the transforms whose child frame is ingest.tf_child_frame
+POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped", TF_TYPE)
 # ROS encodings to OpenCV conversions to BGR (cv_bridge's table: OpenCV names Bayer by the second row).
 COLOUR = {
     "rgb8": cv2.COLOR_RGB2BGR,
@@ -121,10 +123,11 @@ class Bag:
         ]
         return rig_from_camera_infos(*infos, self.path)
 
-    def stereo_messages(self, left: str, right: str) -> Iterator[tuple[str, float, Any]]:
-        """("left" | "right", header stamp, message) in recording order; images are decoded later."""
+    def stereo_messages(self, left: str, right: str | None) -> Iterator[tuple[str, float, Any]]:
+        """("left" | "right", header stamp, message) in recording order (right None: one camera's);
+        images are decoded later."""
         side = {}
-        for name, topic in (("left", left), ("right", right)):
+        for name, topic in (("left", left), ("right", right)) if right else (("left", left),):
             for connection in self.connections(topic, IMAGE_TYPES, f"{name} images"):
                 side[connection.id] = name
         connections = [c for c in self._reader.connections if c.id in side]
@@ -132,18 +135,28 @@ class Bag:
             msg = self._reader.deserialize(raw, connection.msgtype)
             yield side[connection.id], stamp_s(msg), msg
 
-    def poses(self, topic: str) -> tuple[np.ndarray, np.ndarray]:
-        """(N,) header stamps and (N, 4, 4) poses of an odometry or pose topic."""
+    def poses(self, topic: str, child_frame: str = "base_link") -> tuple[np.ndarray, np.ndarray]:
+        """(N,) header stamps and (N, 4, 4) poses of an odometry or pose topic, or of a TF topic's
+        transforms to `child_frame` (e.g. odom -> base_link)."""
         times, poses = [], []
-        for connection, _, raw in self._reader.messages(connections=self.connections(topic, POSE_TYPES, "odometry")):
+        connections = self.connections(topic, POSE_TYPES, "odometry")
+        for connection, _, raw in self._reader.messages(connections=connections):
             msg = self._reader.deserialize(raw, connection.msgtype)
-            pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
-            q, p = pose.orientation, pose.position
-            T = np.eye(4)
-            T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-            T[:3, 3] = (p.x, p.y, p.z)
-            times.append(stamp_s(msg))
-            poses.append(T)
+            if connection.msgtype == TF_TYPE:
+                found = [
+                    (stamp_s(t), t.transform.rotation, t.transform.translation) for t in msg.transforms if t.child_frame_id == child_frame
+                ]
+            else:
+                pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+                found = [(stamp_s(msg), pose.orientation, pose.position)]
+            for stamp, q, p in found:
+                T = np.eye(4)
+                T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+                T[:3, 3] = (p.x, p.y, p.z)
+                times.append(stamp)
+                poses.append(T)
+        if not times and connections[0].msgtype == TF_TYPE:
+            raise InputError(self.path, f"{topic} has no transform to the child frame {child_frame} (ingest.tf_child_frame)")
         return np.asarray(times), np.asarray(poses).reshape(-1, 4, 4)
 
 

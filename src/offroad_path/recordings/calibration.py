@@ -121,23 +121,32 @@ def read_rig(path: str | Path, right_path: str | Path | None = None, unit_m: flo
     return replace(rig, T=rig.T * unit_m).checked()
 
 
+def camera_from_info(info: dict, source: Path, name: str = "left") -> tuple[CameraModel, tuple[np.ndarray, np.ndarray]]:
+    """One camera from its CameraInfo (a dict of k, d, r, p, width, height, distortion_model), checked,
+    with its rectifying rotation R (3, 3) and projection P (3, 4)."""
+    K, D, Rr, P = (np.asarray(info[k], np.float64) for k in ("k", "d", "r", "p"))
+    if K.size != 9 or Rr.size != 9 or P.size != 12 or not K.any():
+        raise InputError(source, f"the {name} CameraInfo has no calibration (K, R, P empty or zero)")
+    model = str(info.get("distortion_model", "")).lower()
+    if model not in FISHEYE_MODELS + PINHOLE_MODELS:
+        raise InputError(
+            source, f"the {name} CameraInfo's distortion model {model!r} is not supported (plumb_bob, rational_polynomial, equidistant)"
+        )
+    size = (int(info["width"]), int(info["height"])) if info.get("width") else None
+    camera = CameraModel(K.reshape(3, 3), D.ravel(), size, model in FISHEYE_MODELS)
+    camera.check(f"the {name} camera", source)
+    return camera, (Rr.reshape(3, 3), P.reshape(3, 4))
+
+
 def rig_from_camera_infos(left: dict, right: dict, source: Path) -> StereoRig:
     """A rig from two CameraInfo (as dicts of k, d, r, p, width, height, distortion_model): ROS
     stores each camera's rectifying rotation R_i and projection P_i, whose P_right[0, 3] = -f' B;
     so x_rect_l = R_l x_l, x_rect_r = x_rect_l - (B, 0, 0) and x_r = R_r^T (R_l x_l + t)."""
     cams, rects = [], []
     for name, info in (("left", left), ("right", right)):
-        K, D, Rr, P = (np.asarray(info[k], np.float64) for k in ("k", "d", "r", "p"))
-        if K.size != 9 or Rr.size != 9 or P.size != 12 or not K.any():
-            raise InputError(source, f"the {name} CameraInfo has no calibration (K, R, P empty or zero)")
-        model = str(info.get("distortion_model", "")).lower()
-        if model not in FISHEYE_MODELS + PINHOLE_MODELS:
-            raise InputError(
-                source, f"the {name} CameraInfo's distortion model {model!r} is not supported (plumb_bob, rational_polynomial, equidistant)"
-            )
-        size = (int(info["width"]), int(info["height"])) if info.get("width") else None
-        cams.append(CameraModel(K.reshape(3, 3), D.ravel(), size, model in FISHEYE_MODELS))
-        rects.append((Rr.reshape(3, 3), P.reshape(3, 4)))
+        camera, rectification = camera_from_info(info, source, name)
+        cams.append(camera)
+        rects.append(rectification)
     (R_l, _), (R_r, P_r) = rects
     if P_r[0, 3] == 0:
         raise InputError(

@@ -1,4 +1,5 @@
-"""Stereo rectification at the output size (OpenCV), and the checks that it worked."""
+"""Stereo rectification at the output size (OpenCV), and the checks that it worked; one camera's
+undistortion to a pinhole image of the output size."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offroad_path.recordings.calibration import StereoRig
+from offroad_path.recordings.calibration import CameraModel, StereoRig
 from offroad_path.sequence.calibration import StereoCalibration
 
 
@@ -65,6 +66,28 @@ class Rectifier:
         return math.degrees(math.atan2(axis[1], axis[2]))
 
 
+class Undistorter:
+    """One camera's raw frame as a distortion-free pinhole image of `output_size` (the mono sequence's
+    calib.txt holds its one projection); `camera` at the raw frames' `input_size`, `alpha` as Rectifier's."""
+
+    def __init__(self, camera: CameraModel, input_size: tuple[int, int], output_size: tuple[int, int], alpha: float):
+        if camera.fisheye:
+            new_K = cv2.fisheye.estimateNewCameraMatrixForUndistortRectify(
+                camera.K, camera.D, input_size, np.eye(3), balance=alpha, new_size=output_size
+            )
+            self.map = cv2.fisheye.initUndistortRectifyMap(camera.K, camera.D, np.eye(3), new_K, output_size, cv2.CV_16SC2)
+        else:
+            new_K, _ = cv2.getOptimalNewCameraMatrix(camera.K, camera.D, input_size, alpha, output_size)
+            self.map = cv2.initUndistortRectifyMap(camera.K, camera.D, np.eye(3), new_K, output_size, cv2.CV_16SC2)
+        self.R_left = np.eye(3)  # no rotation: the image keeps the camera's own axes
+        self.calibration = StereoCalibration(np.hstack([new_K, np.zeros((3, 1))]), None)
+        self.output_size = output_size
+        self.pitch_change_deg = 0.0
+
+    def __call__(self, image: np.ndarray, _: None = None) -> tuple[np.ndarray]:
+        return (cv2.remap(image, *self.map, cv2.INTER_LINEAR),)
+
+
 @dataclass
 class EpipolarCheck:
     median_px: float  # median |y_left - y_right| of matched features
@@ -101,12 +124,12 @@ def epipolar_error(left: np.ndarray, right: np.ndarray, max_disparity_px: float)
     return EpipolarCheck(float(np.median(np.abs(disparity[good, 1]))), int(good.sum()))
 
 
-def contact_sheet(pairs: list[tuple[np.ndarray, np.ndarray]], width: int = 1024, line_every_px: int = 24) -> np.ndarray:
-    """Rectified pairs side by side, one per row, with horizontal lines: in a good rectification a
-    feature sits on the same line in both images."""
+def contact_sheet(pairs: list[tuple[np.ndarray, ...]], width: int = 1024, line_every_px: int = 24) -> np.ndarray:
+    """Rectified pairs side by side (or one camera's frames), one per row, with horizontal lines: in
+    a good rectification a feature sits on the same line in both images."""
     rows = []
-    for left, right in pairs:
-        row = np.hstack([cv2.cvtColor(im, cv2.COLOR_GRAY2BGR) if im.ndim == 2 else im for im in (left, right)])
+    for images in pairs:
+        row = np.hstack([cv2.cvtColor(im, cv2.COLOR_GRAY2BGR) if im.ndim == 2 else im for im in images])
         for y in range(line_every_px // 2, row.shape[0], line_every_px):
             cv2.line(row, (0, y), (row.shape[1] - 1, y), (0, 255, 0), 1)
         rows.append(row)

@@ -1,6 +1,7 @@
 """Where raw stereo frames come from: a ROS bag or two video files. Both are checked when opened
 (topics, calibration, frame size, offset), before anything is written, and both give the same
-thing: a rig calibration, the raw frame size and time-stamped raw pairs."""
+thing: a rig calibration, the raw frame size and time-stamped raw pairs. A bag of one camera with
+an odometry or TF topic (ingest.mono) gives that camera's calibration and frames (right None)."""
 
 from __future__ import annotations
 
@@ -13,8 +14,8 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.errors import InputError
-from offroad_path.recordings.bags import IMAGE_TYPES, POSE_TYPES, Bag, decode_image, info_topic_for
-from offroad_path.recordings.calibration import StereoRig, read_rig
+from offroad_path.recordings.bags import IMAGE_TYPES, INFO_TYPE, POSE_TYPES, Bag, decode_image, info_topic_for
+from offroad_path.recordings.calibration import StereoRig, camera_from_info, camera_info_dict, read_rig
 from offroad_path.recordings.sync import SyncStats, check_pairing, pair_by_stamp, poses_at
 from offroad_path.recordings.video import estimate_offset, frames, motion_signal, probe
 
@@ -39,6 +40,8 @@ def _file_rig(c: DictConfig) -> StereoRig | None:
 
 
 class BagSource:
+    mono = False
+
     def __init__(self, c: DictConfig):
         self.c = c
         self.bag = Bag(c.bag)
@@ -98,7 +101,7 @@ class BagSource:
         body_to_camera = (
             ROS_BODY_TO_OPTICAL if self.c.body_to_camera is None else np.asarray(self.c.body_to_camera, np.float64).reshape(4, 4)
         )
-        stamps, poses = self.bag.poses(topic)
+        stamps, poses = self.bag.poses(topic, self.c.tf_child_frame)
         return poses_at(stamps, poses, times, self.path, topic) @ body_to_camera
 
     def describe(self) -> dict:
@@ -118,7 +121,48 @@ class BagSource:
         self.bag.__exit__()
 
 
+class MonoBagSource(BagSource):
+    """One camera's image topic and an odometry, pose or TF topic (ingest.mono=true): frames with
+    right None, the camera's own calibration from its CameraInfo, and poses for every frame."""
+
+    mono = True
+
+    def _check(self, c: DictConfig) -> None:
+        if not c.topics.odometry:
+            raise ValueError("ingest.mono=true needs ingest.topics.odometry: a recording of one camera is labelled from its poses")
+        if c.calibration or c.topics.right:
+            raise ValueError(
+                "ingest.mono=true reads one camera (ingest.topics.left) and its CameraInfo: "
+                "leave ingest.topics.right and ingest.calibration unset"
+            )
+        if not c.topics.left:
+            images = [t for t, (m, _) in self.bag.topics().items() if m in IMAGE_TYPES]
+            raise ValueError(f"ingest.topics.left is required: the image topics of {self.path} are {', '.join(images) or 'none'}")
+        self.names = {"left": c.topics.left}
+        info = camera_info_dict(self.bag.first(c.topics.left_info or info_topic_for(c.topics.left), (INFO_TYPE,), "CameraInfo"))
+        first = decode_image(self.bag.first(c.topics.left, IMAGE_TYPES, "images"), c.topics.left, self.path)
+        self.input_size = first.shape[1], first.shape[0]
+        self.camera = camera_from_info(info, self.path)[0].at_size(self.input_size, self.path)
+        self.rig = None
+        self.bag.connections(c.topics.odometry, POSE_TYPES, "odometry")
+
+    def headed_pairs(self, keep: Callable[[float], bool]) -> Iterator[tuple[float, Any, np.ndarray, None]]:
+        for _, t, msg in self.bag.stereo_messages(self.names["left"], None):
+            self.stats.left += 1
+            if keep(t):
+                image = decode_image(msg, self.names["left"], self.path)
+                if (image.shape[1], image.shape[0]) != self.input_size:
+                    size, first = f"{image.shape[1]}x{image.shape[0]}", f"{self.input_size[0]}x{self.input_size[1]}"
+                    raise InputError(self.path, f"the frame at {t:.6f} s is {size}, the stream's first {first}: one recording, one size")
+                yield t, msg.header, image, None
+
+    def describe(self) -> dict:
+        return {"source": self.path.name, "topics": self.names | {"odometry": self.c.topics.odometry}, "images": self.stats.left}
+
+
 class VideoSource:
+    mono = False
+
     def __init__(self, c: DictConfig):
         self.c = c
         if Path(c.videos.left).resolve() == Path(c.videos.right).resolve():
@@ -192,10 +236,14 @@ class VideoSource:
 
 
 def open_source(c: DictConfig) -> BagSource | VideoSource:
-    """The source ingest.bag or ingest.videos names (exactly one)."""
+    """The source ingest.bag or ingest.videos names (exactly one); ingest.mono: a bag of one camera."""
     has_videos = c.videos.left is not None or c.videos.right is not None
     if (c.bag is None) == (not has_videos):
         raise ValueError("give either ingest.bag=PATH or ingest.videos.left=PATH ingest.videos.right=PATH (exactly one source)")
     if has_videos and (c.videos.left is None or c.videos.right is None):
         raise ValueError("ingest.videos needs both left and right")
-    return BagSource(c) if c.bag is not None else VideoSource(c)
+    if c.mono and c.bag is None:
+        raise ValueError("ingest.mono=true reads a bag (ingest.bag=PATH) with one camera and an odometry or TF topic")
+    if c.bag is None:
+        return VideoSource(c)
+    return MonoBagSource(c) if c.mono else BagSource(c)

@@ -1,6 +1,7 @@
 """Write a raw stereo source as a rectified sequence in this project's layout (docs/design.md):
 image_l/, image_r/, calib.txt, times.txt, meta.json, poses.txt when the source has poses, and
-preview.jpg, a contact sheet of rectified pairs with horizontal lines."""
+preview.jpg, a contact sheet of rectified pairs with horizontal lines. A source of one camera
+(ingest.mono) writes image_l/ only, undistorted, and a calib.txt of its one projection."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from omegaconf import DictConfig
 from offroad_path import __version__
 from offroad_path.errors import InputError
 from offroad_path.geometry.path import path_length
-from offroad_path.recordings.rectify import Rectifier, contact_sheet, epipolar_error
+from offroad_path.recordings.rectify import Rectifier, Undistorter, contact_sheet, epipolar_error
 from offroad_path.recordings.sources import BagSource, VideoSource
 from offroad_path.recordings.sync import Subsampler
 from offroad_path.sequence.meta import FOOTPRINT, GENERATOR, INGESTED
@@ -28,7 +29,7 @@ CHECKED_PAIRS = 8  # pairs spread over the drive whose epipolar error is measure
 PREVIEW_PAIRS = 4
 
 
-def rectified_poses(camera_poses: np.ndarray, rectifier: Rectifier) -> np.ndarray:
+def rectified_poses(camera_poses: np.ndarray, rectifier: Rectifier | Undistorter) -> np.ndarray:
     """Raw left camera poses to rectified left camera poses, relative to the first (KITTI's
     convention): a point x_rect is R_left^T x_rect in the raw camera."""
     to_raw = np.eye(4)
@@ -39,20 +40,23 @@ def rectified_poses(camera_poses: np.ndarray, rectifier: Rectifier) -> np.ndarra
 
 def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) -> dict:
     """Rectify every kept pair of `source` into `out`; returns what meta.json says."""
-    rectifier = Rectifier(source.rig, source.input_size, (c.width, c.height), c.alpha)
-    for sub in ("image_l", "image_r"):
+    output_size = (c.width, c.height)
+    if source.mono:
+        rectifier, subs = Undistorter(source.camera, source.input_size, output_size, c.alpha), ("image_l",)
+    else:
+        rectifier, subs = Rectifier(source.rig, source.input_size, output_size, c.alpha), ("image_l", "image_r")
+    for sub in subs:
         (out / sub).mkdir()
     sampler = Subsampler(c.fps)
     times = []
     for t, raw_left, raw_right in source.pairs(sampler.keep):
         name = f"{len(times):06d}.png"
-        for sub, image in zip(("image_l", "image_r"), rectifier(raw_left, raw_right), strict=True):
+        for sub, image in zip(subs, rectifier(raw_left, raw_right), strict=True):
             write_image(out / sub / name, image, FAST_PNG)
         times.append(t)
     if len(times) < 2:
-        raise InputError(
-            source.path, f"yields {len(times)} stereo pair(s) after synchronisation and ingest.fps; a sequence needs at least 2"
-        )
+        what = "frame(s)" if source.mono else "stereo pair(s) after synchronisation and"
+        raise InputError(source.path, f"yields {len(times)} {what} after ingest.fps; a sequence needs at least 2")
     times = np.asarray(times)
     calibration = rectifier.calibration
     (out / "calib.txt").write_text(calibration.to_text())
@@ -63,7 +67,7 @@ def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) ->
         poses = rectified_poses(camera_poses, rectifier)
         (out / "poses.txt").write_text(poses_to_text(poses))
         meta["distance_m"] = path_length(poses)
-    check = _epipolar(out, len(times), c)
+    check = None if source.mono else _epipolar(out, len(times), c)
     meta |= {
         "frames": len(times),
         "start_stamp_s": float(times[0]),
@@ -78,7 +82,7 @@ def write_sequence(source: BagSource | VideoSource, c: DictConfig, out: Path) ->
         "epipolar_error_px": check,
     } | _footprint(c, rectifier)
     (out / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
-    _preview(out, len(times))
+    _preview(out, len(times), subs)
     return meta
 
 
@@ -94,8 +98,8 @@ def _spread(count: int, n: int) -> list[int]:
     return sorted({int(i) for i in np.linspace(0, count - 1, min(n, count))})
 
 
-def _read_pair(out: Path, i: int) -> tuple[np.ndarray, np.ndarray]:
-    return tuple(cv2.imread(str(out / sub / f"{i:06d}.png"), cv2.IMREAD_UNCHANGED) for sub in ("image_l", "image_r"))
+def _read_pair(out: Path, i: int, subs: tuple[str, ...] = ("image_l", "image_r")) -> tuple[np.ndarray, ...]:
+    return tuple(cv2.imread(str(out / sub / f"{i:06d}.png"), cv2.IMREAD_UNCHANGED) for sub in subs)
 
 
 def _epipolar(out: Path, count: int, c: DictConfig) -> float | None:
@@ -116,6 +120,6 @@ def _epipolar(out: Path, count: int, c: DictConfig) -> float | None:
     return error
 
 
-def _preview(out: Path, count: int) -> None:
-    sheet = contact_sheet([_read_pair(out, i) for i in _spread(count, PREVIEW_PAIRS)])
+def _preview(out: Path, count: int, subs: tuple[str, ...]) -> None:
+    sheet = contact_sheet([_read_pair(out, i, subs) for i in _spread(count, PREVIEW_PAIRS)])
     write_image(out / "preview.jpg", sheet, [cv2.IMWRITE_JPEG_QUALITY, 85])
