@@ -45,8 +45,21 @@ def test_random_split_is_the_papers_and_warns(compose_config, caplog):
     assert any(abs(f.travelled_m - t) <= 2.0 for f in parts["test"] for t in train)  # neighbours leak
 
 
+def test_stretch_split_holds_out_the_last_stretch_of_each_recording_with_a_guard(compose_config):
+    """strategy=stretch (experiment=own): of 0-198 m in 2 m steps, test is from 148.5 m (the last
+    quarter of 198 m), validation from 118.8 m (the 15 % before), and training ends 10 m before that."""
+    c = compose_config("split.strategy=stretch", "split.test_fraction=0.25", "split.val_fraction=0.15", "split.guard_m=10").split
+    parts, guarded = split_frames(frames_along(2, 100, 2.0), c)
+    for sequence in ("s0", "s1"):
+        own = {name: sorted(f.travelled_m for f in part if f.sequence == sequence) for name, part in parts.items()}
+        assert (own["test"][0], own["test"][-1], len(own["test"])) == (150.0, 198.0, 25)
+        assert (own["val"][0], own["val"][-1], len(own["val"])) == (120.0, 148.0, 15)
+        assert (own["train"][0], own["train"][-1], len(own["train"])) == (0.0, 110.0, 56)  # 112-118 m: within 10 m of 120
+    assert guarded == 2 * 4
+
+
 def test_unknown_strategy_lists_valid_ones(compose_config):
-    with pytest.raises(ValueError, match="valid: grouped, random"):
+    with pytest.raises(ValueError, match="valid: grouped, stretch, random"):
         split_frames(frames_along(1, 10, 2.0), compose_config("split.strategy=kfold").split)
 
 

@@ -306,7 +306,7 @@ class LabelConfig:
 class SplitConfig:
     labels_dir: str = MISSING
     out_dir: str = MISSING
-    # grouped: by blocks of driving, no leakage; random: the paper's per-image split
+    # grouped: by blocks of driving, no leakage; stretch: each recording's last stretch; random: the paper's per-image split
     strategy: str = setting(one_of(registry("data.splitting", "STRATEGIES")))
     test_fraction: float = setting(between(0, 1, low_open=True, high_open=True))
     val_fraction: float = setting(between(0, 1, high_open=True))

@@ -8,6 +8,10 @@ within `guard_m` of a held-out frame are left out, so no held-out frame has a ne
 Frames of held-out test worlds (a recording whose meta.json says "split": "test", as the
 synthesize stage's test_NNN drives do) are the whole test set when there are any; test_fraction
 then takes no blocks from the other drives.
+
+The `stretch` strategy holds out one stretch per recording instead (your own driving): the last
+test_fraction of each sequence's labelled driving is test, the val_fraction before it validation,
+with the same guard.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ if TYPE_CHECKING:
     from offroad_path.config import SplitConfig
 
 log = logging.getLogger(__name__)
-STRATEGIES = ("grouped", "random")
+STRATEGIES = ("grouped", "stretch", "random")
 
 
 @dataclass(frozen=True)
@@ -55,6 +59,21 @@ def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Fr
         split = {"test": worlds + picked[:n_test], "val": picked[n_test : n_test + n_val], "train": picked[n_test + n_val :]}
         return split, 0
 
+    split = _stretches(frames, test_fraction, c.val_fraction) if c.strategy == "stretch" else _blocks(frames, test_fraction, c, rng)
+    held_out: dict[str, np.ndarray] = {}
+    for frame in split["test"] + split["val"]:
+        held_out.setdefault(frame.sequence, []).append(frame.travelled_m)
+    train = [f for f in split["train"] if not _near(f, held_out, c.guard_m)]
+    guarded = len(split["train"]) - len(train)
+    split["train"] = train
+    split["test"] += worlds
+    for name in split:
+        split[name].sort(key=lambda f: (f.sequence, f.f0))
+    return split, guarded
+
+
+def _blocks(frames: list[Frame], test_fraction: float, c: SplitConfig, rng: np.random.Generator) -> dict[str, list[Frame]]:
+    """Whole blocks of driving, in random order, to test and validation until each has its share."""
     groups: dict[tuple[str, int], list[Frame]] = {}
     for frame in frames:
         groups.setdefault(block_of(frame.sequence, frame.travelled_m, c.block_m), []).append(frame)
@@ -69,16 +88,21 @@ def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Fr
                 break
         else:
             split["train"].extend(groups[key])
-    held_out: dict[str, np.ndarray] = {}
-    for frame in split["test"] + split["val"]:
-        held_out.setdefault(frame.sequence, []).append(frame.travelled_m)
-    train = [f for f in split["train"] if not _near(f, held_out, c.guard_m)]
-    guarded = len(split["train"]) - len(train)
-    split["train"] = train
-    split["test"] += worlds
-    for name in split:
-        split[name].sort(key=lambda f: (f.sequence, f.f0))
-    return split, guarded
+    return split
+
+
+def _stretches(frames: list[Frame], test_fraction: float, val_fraction: float) -> dict[str, list[Frame]]:
+    """Per sequence, by distance along its labelled driving: the last test_fraction to test, the
+    val_fraction before it to validation, the rest to training."""
+    split: dict[str, list[Frame]] = {"test": [], "val": [], "train": []}
+    for sequence in sorted({f.sequence for f in frames}):
+        own = [f for f in frames if f.sequence == sequence]
+        first, last = min(f.travelled_m for f in own), max(f.travelled_m for f in own)
+        test_from = last - test_fraction * (last - first)
+        val_from = test_from - val_fraction * (last - first)
+        for f in own:
+            split["test" if f.travelled_m >= test_from else "val" if f.travelled_m >= val_from and val_fraction else "train"].append(f)
+    return split
 
 
 def _near(frame: Frame, held_out: dict[str, list[float]], guard_m: float) -> bool:
