@@ -80,6 +80,8 @@ def pools(recording: Path, other: Path, work: Path, guard_m: float):
 def write_split(folder: Path, train: list, test: list) -> Path:
     from offroad_path.data.manifest import Sample, write_manifest
 
+    if folder.is_dir():  # an earlier run's, with the same --work: rescoring
+        return folder
     folder.mkdir(parents=True)
     write_manifest(folder / "train.csv", [s for sample in train for s in (sample, Sample(**{**asdict(sample), "mirrored": True}))])
     write_manifest(folder / "val.csv", [])
@@ -88,9 +90,13 @@ def write_split(folder: Path, train: list, test: list) -> Path:
 
 
 def fine_tune(split: Path, out: Path, args: argparse.Namespace, init: str, seed: int) -> Path:
-    """The train stage on `split` for args.steps optimiser steps; the checkpoint it keeps."""
+    """The train stage on `split` for args.steps optimiser steps; the checkpoint it keeps (one
+    already there from an earlier run of this benchmark with the same --work is kept: rescoring)."""
     from offroad_path.config import load_config
     from offroad_path.train import train
+
+    if (out / "checkpoints" / "best.ckpt").is_file():
+        return out / "checkpoints" / "best.ckpt"
 
     cfg = load_config(
         f"model={args.model}",
@@ -153,6 +159,7 @@ def curve(args) -> dict:
             row |= {"world_minus_none": paired.estimate, "world_minus_none_low": paired.low, "world_minus_none_high": paired.high}
         rows.append({"init": init, "frames": size, **row})
     return {
+        "paired": paired_rows(sums, resampling, len(pool)),
         "model": args.model,
         "steps": args.steps,
         "seeds": list(args.seeds),
@@ -194,10 +201,27 @@ def train_runs(args: argparse.Namespace, pool: list, test_samples: list, work: P
             if init == "shuffled":
                 chosen = shuffled_labels(chosen, np.random.default_rng(1000 + seed))
             name = f"{init}-{size}-seed{seed}"
-            split = write_split(work / "splits" / name, chosen, test_samples)
+            split = (
+                work / "splits" / name if (work / "splits" / name).is_dir() else write_split(work / "splits" / name, chosen, test_samples)
+            )
             runs[init, size].append(fine_tune(split, work / "runs" / name, args, "world" if init == "shuffled" else init, seed))
             print(f"  {name}: {time.perf_counter() - started:.0f} s", flush=True)
     return runs
+
+
+def paired_rows(sums: dict, resampling, pool: int) -> list[dict]:
+    """IoU differences on the same resampled blocks and seeds: every fine-tuned network minus the world
+    network it started from (0 frames), and real labels minus shuffled ones (every frame)."""
+    from offroad_path.evaluation.bootstrap import paired_interval
+    from offroad_path.evaluation.scores import iou
+
+    pairs = [((init, size), ("world", 0)) for init, size in sums if size and init != "shuffled"]
+    pairs += [(("world", pool), ("shuffled", pool))] if ("shuffled", pool) in sums else []
+    rows = []
+    for a, b in pairs:
+        found = paired_interval(sums[a], sums[b], iou, resampling)
+        rows.append({"a": f"{a[0]} {a[1]}", "b": f"{b[0]} {b[1]}", "difference": found.estimate, "low": found.low, "high": found.high})
+    return rows
 
 
 def table(result: dict) -> str:
@@ -218,6 +242,8 @@ def table(result: dict) -> str:
             f"{r['gain']:+.3f} [{r['gain_low']:+.3f}, {r['gain_high']:+.3f}] | "
             f"{r['far_end']:+.2f} [{r['far_end_low']:+.2f}, {r['far_end_high']:+.2f}] | {paired} |"
         )
+    lines += ["", "| paired IoU difference | estimate [95 %] |", "| --- | --- |"]
+    lines += [f"| {r['a']} minus {r['b']} | {r['difference']:+.3f} [{r['low']:+.3f}, {r['high']:+.3f}] |" for r in result["paired"]]
     return "\n".join(lines)
 
 

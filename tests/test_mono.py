@@ -152,3 +152,22 @@ def test_postprocessing_refuses_the_depth_mask_without_stereo_and_runs_without_i
     assert any("without the depth mask (postprocess.use_depth=false)" in r.getMessage() for r in caplog.records)
     filtered = np.load(read_predictions_manifest(out / "manifest.csv", "postprocess")[0][1])
     assert filtered.shape == (36, 64) and filtered[28, 32] > 0.5 and filtered[2, 2] == 0  # blurred, thresholded, no depth cut
+
+
+def test_the_report_says_which_test_images_were_post_processed_without_the_depth_mask():
+    from types import SimpleNamespace
+
+    from offroad_path.data.manifest import Sample
+    from offroad_path.evaluation.sections import ResultsTable
+
+    def sample(disparity: str) -> Sample:
+        return Sample("drive", 0, False, "image.png", "label.png", disparity, "", 700.0, 0.0)
+
+    counts = {("unet-none", "no"): np.array([[1.0, 1, 1, 1]]), ("unet-none", "yes"): np.array([[2.0, 1, 1, 0]])}  # tp fp tn fn
+    said = "2 of 3 test images come from a recording of one camera: post-processed without the depth mask"
+    table = ResultsTable()
+    table.score(SimpleNamespace(runs=["unet-none"], samples=[sample(""), sample(""), sample("d.png")], counts=counts))
+    assert said in table.markdown()
+    assert "| U-Net | none | no | 0.500 | 0.500 | 0.500 | 0.333 |" in table.markdown()  # tp 1, fp 1, fn 1: IoU 1/3
+    table.score(SimpleNamespace(runs=["unet-none"], samples=[sample("d.png")] * 3, counts=counts))
+    assert "one camera" not in table.markdown()

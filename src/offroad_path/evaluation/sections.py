@@ -45,9 +45,11 @@ class ResultsTable:
         self.runs: list[str] = []
         self.rows: dict[tuple[str, str], ResultRow] = {}
         self.per_image_iou: dict[tuple[str, str], np.ndarray] = {}
+        self.without_depth, self.images = 0, 0  # test images of one camera (post-processed without the depth mask), of all
 
     def score(self, test: TestSet) -> None:
         self.runs = test.runs
+        self.without_depth, self.images = sum(not s.disparity for s in test.samples), len(test.samples)
         for run in test.runs:
             model, pretraining = split_run_name(run)
             for pp in POSTPROCESSING:
@@ -65,7 +67,15 @@ class ResultsTable:
     def markdown(self) -> str:
         return (
             "# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
-            "The last column is the mean of per-image IoU, not the paper's measure.\n\n" + markdown_table(self.table())
+            "The last column is the mean of per-image IoU, not the paper's measure."
+            + (
+                f" {self.without_depth} of {self.images} test images come from "
+                "a recording of one camera: post-processed without the depth mask (it needs stereo disparity)."
+                if self.without_depth
+                else ""
+            )
+            + "\n\n"
+            + markdown_table(self.table())
         )
 
     def metrics(self) -> dict:
