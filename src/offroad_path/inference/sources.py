@@ -113,7 +113,7 @@ def _sequence(path: Path, disparity_cfg, max_frames: int | None, max_pixels: int
     fps = None
     if seq.times is not None and len(seq.times) > 1 and np.median(np.diff(seq.times)) > 0:
         fps = float(1.0 / np.median(np.diff(seq.times)))
-    matcher = sgbm(disparity_cfg) if disparity_cfg is not None else None
+    matcher = sgbm(disparity_cfg) if disparity_cfg is not None and not seq.mono else None  # one camera: no depth mask
 
     def frames() -> Iterator[Frame]:
         for i in range(n):
