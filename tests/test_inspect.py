@@ -77,3 +77,25 @@ def test_a_folder_without_label_runs_is_refused_in_one_line(tmp_path, capsys):
     assert exit_info.value.code == 2
     (line,) = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error: ")]
     assert str(tmp_path / "empty") in line and "holds no label run" in line and not (tmp_path / "out").exists()
+
+
+def test_a_mono_label_run_is_inspected_without_point_clouds(compose_config, drive, tmp_path):
+    """One camera (issue 45): image, label and footprint per label, the recorded poses; no stereo point
+    cloud and no footprint check, which need disparity."""
+    from offroad_path.label import label
+
+    recordings = tmp_path / "mono"
+    shutil.copytree(drive, recordings, ignore=shutil.ignore_patterns("image_r"))
+    label(compose_config(f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'labels'}", f"label.metrics_path={tmp_path / 'm.json'}",
+                         "label.workers=1", "label.poses.source=file", "mlflow.enabled=false"))  # fmt: skip
+    main([str(tmp_path / "labels"), "--recording", str(recordings), "--out", str(tmp_path / "out")])
+    logged = entities(tmp_path / "out" / "drive.rrd")
+    kept = len(list((tmp_path / "labels" / "drive" / "label").glob("*.png")))
+    assert (
+        len(logged["/world/camera/image/label"]["SegmentationImage:buffer"])
+        == len(logged["/world/footprint"]["LineStrips3D:strips"])
+        == kept
+        > 0
+    )
+    assert "/world/points" not in logged and "/world/vo_trajectory" not in logged and "/world/recorded_trajectory" in logged
+    assert json.loads((tmp_path / "out" / "checks.json").read_text()) == {}

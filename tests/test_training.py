@@ -234,7 +234,7 @@ def test_unknown_choices_list_the_valid_ones(compose_config, split_dir, tmp_path
 
     with pytest.raises(ConfigCompositionException, match="model"):
         compose_config("model=deeplab")
-    with pytest.raises(ValueError, match="valid: none, segmentation, imagenet"):
+    with pytest.raises(ValueError, match="valid: none, segmentation, world, imagenet"):
         train(tiny_config(tmp_path, "pretraining.name=places365", "trainer.fast_dev_run=true", "mlflow.enabled=false"))
 
 

@@ -87,7 +87,7 @@ def log_static(rr, rec, it: Inspected) -> None:
     """The frame convention, the trajectories and the camera's intrinsics."""
     rec.log("world", rr.ViewCoordinates.RDF, static=True)  # the first camera's frame: x right, y down, z forward
     rec.log("world/camera/image", rr.AnnotationContext([(PATH_CLASS, "path", (0, 220, 0))]), static=True)
-    if it.run.poses is not None:
+    if it.run.poses is not None and it.run.steps:  # steps.csv: the poses are the VO's
         rec.log("world/vo_trajectory", rr.LineStrips3D([it.run.poses[:, :3, 3]], colors=[(255, 140, 0)]), static=True)
     if it.seq is not None and it.seq.poses is not None:
         recorded = np.linalg.inv(it.seq.poses[0]) @ it.seq.poses
@@ -122,10 +122,11 @@ def log_label(rr, rec, it: Inspected, f0: int, fn: int) -> None:
         corners = np.c_[it.footprint.corners(), np.ones(4)]
         rectangles = [(poses[j] @ corners.T).T[:, :3] for j in range(f0 + 1, fn + 1)]
         rec.log("world/footprint", rr.LineStrips3D([np.vstack([r, r[:1]]) for r in rectangles], colors=[(0, 220, 0)]))
-    if it.seq is not None:
+    stereo = it.seq is not None and not it.seq.mono  # one camera: no disparity, no point cloud, no depth check
+    if stereo:
         points, colours = stereo_points(it.seq, it.run, f0, it.every)
         rec.log("world/points", rr.Points3D(to_world(poses[f0], points), colors=colours, radii=0.03))
-    if it.seq is not None and it.footprint is not None:
+    if stereo and it.footprint is not None:
         it.check.add(it.seq, it.run.disparity(f0), swept_polygons(poses, f0, fn, it.footprint))
         ratio = float(np.median(it.check.ratios[-1])) if len(it.check.ratios[-1]) else float("nan")
         rec.log("checks/stereo_over_footprint", rr.Scalars(ratio))
@@ -180,7 +181,7 @@ def inspect(labels: Path, recording: Path | None, out: Path, every: int = 4) -> 
                 log_sequence(rr, tmp / f"{name}.rrd", it)
             except RuntimeError as e:  # rerun's writer: a full disk, a folder that may not be written
                 raise OSError(errno.EIO, f"the recording could not be written ({one_line(e)})", str(tmp / f"{name}.rrd")) from e
-            if it.footprint is not None:
+            if it.footprint is not None and not seq.mono:  # the check compares stereo depth with the footprint
                 checks[name] = it.check.verdict(it.footprint.camera_height_m)
                 checks[name]["curve_depth"], checks[name]["curve_ratio"] = ratio_curve(it.check, np.arange(2.0, 16.0, 1.0))
         summary_figure(str(labels), runs, checks, tmp / "summary.png")

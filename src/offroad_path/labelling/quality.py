@@ -40,17 +40,17 @@ class LabelRun:
     """One sequence's label outputs (docs/design.md, the label stage's contract)."""
 
     folder: Path
-    poses: np.ndarray | None  # (N, 4, 4) VO poses, or None (label.poses.source=file)
+    poses: np.ndarray | None  # (N, 4, 4) the poses the labels were made from (VO's, or a file's copied beside them)
     steps: list[dict]
     segments: list[dict]
     drift: list[dict]
 
     @classmethod
     def read(cls, folder: Path) -> LabelRun:
-        vo = folder / "poses_vo.txt"
+        made_from = [folder / name for name in ("poses_vo.txt", "poses.txt") if (folder / name).is_file()]
         return cls(
             folder,
-            read_poses(vo) if vo.is_file() else None,
+            read_poses(made_from[0]) if made_from else None,
             read_rows(folder / "steps.csv"),
             read_rows(folder / "report.csv"),
             read_rows(folder / "drift.csv"),
