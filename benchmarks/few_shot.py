@@ -116,7 +116,10 @@ def fine_tune(split: Path, out: Path, args: argparse.Namespace, init: str, seed:
 
 
 def world_checkpoint(model: str, seed: int) -> Path:
-    return ROOT / "data" / "runs" / f"{model}-none" / f"seed{seed}" / "checkpoints" / "best.ckpt"
+    """Where pretraining=world starts from (conf/pretraining/world.yaml), in this checkout."""
+    from offroad_path.config import load_config
+
+    return ROOT / load_config(f"model={model}", "pretraining=world", f"seed={seed}").pretraining.checkpoint
 
 
 def predict(checkpoints: list[Path], images: list[np.ndarray]) -> np.ndarray:
