@@ -9,7 +9,7 @@ from offroad_path.world.appearance import TRACKS, Sensor, draw_appearance
 from offroad_path.world.classes import DIRT, GRASS
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
-from offroad_path.world.held_out import held_out_look, required_groups
+from offroad_path.world.held_out import STRESS_DRAWS
 from offroad_path.world.record import camera_for
 from offroad_path.world.render import render_view
 from offroad_path.world.scene import build_world
@@ -26,7 +26,7 @@ def plain_sensor(**changes) -> Sensor:
 
 def test_no_training_world_shows_a_held_out_look_and_every_held_out_world_shows_one():
     seen = [draw_appearance(seed, HELD_OUT) for seed in range(300)]
-    held = [draw_appearance(seed, HELD_OUT, held_out_look=True) for seed in range(60)]
+    held = [draw_appearance(seed, HELD_OUT, "held_out") for seed in range(60)]
 
     def matches(look) -> bool:
         return any(all(getattr(look, k) == v for k, v in c.items()) for c in HELD_OUT)
@@ -35,6 +35,26 @@ def test_no_training_world_shows_a_held_out_look_and_every_held_out_world_shows_
     assert all(matches(look) and look.held_out for look in held)
     assert {look.track for look in seen} == set(TRACKS)  # every surface occurs (ruts with other seasons)
     assert {look.sensor.greyscale for look in seen} == {True, False}
+
+
+def test_the_training_weights_leave_out_the_values_of_weight_zero_and_full_variety_draws_them():
+    weights = {"track": {"dirt": 1.0, "gravel": 3.0, "none": 0.0}, "light": {"clear": 1.0, "hazy": 0.0}}
+    training = [draw_appearance(seed, HELD_OUT, "training", weights) for seed in range(400)]
+    assert {look.track for look in training} == {"dirt", "gravel"} and {look.light for look in training} == {"clear"}
+    gravel = sum(look.track == "gravel" for look in training) / len(training)
+    assert 0.68 < gravel < 0.82  # 3 to 1, within sampling error (sd 0.02)
+    assert not any(look.outside or look.full_variety for look in training)
+    assert {look.season for look in training} == {"summer", "spring", "dry", "autumn"}  # an axis not listed: every value
+    every = [draw_appearance(seed, HELD_OUT, "full_variety", weights) for seed in range(200)]
+    assert {look.track for look in every} == set(TRACKS) and all(look.full_variety for look in every)
+    outside = [look for look in every if look.outside]
+    assert outside and all(look.track not in ("dirt", "gravel") or look.light != "clear" for look in outside)
+    assert {look.tags()["look"] for look in every} == {"seen", "outside"}
+    # held-out looks draw their free axes by the weights
+    held = [draw_appearance(seed, HELD_OUT, "held_out", {"season": {"spring": 1.0}, "light": {"overcast": 1.0}}) for seed in range(30)]
+    assert {look.season for look in held} <= {"spring", "autumn"} and {look.light for look in held} <= {"overcast", "low_sun"}
+    with pytest.raises(ValueError, match="unknown look draw 'odd'; valid: training, full_variety, held_out"):
+        draw_appearance(0, HELD_OUT, "odd")
 
 
 def test_a_look_changes_the_appearance_not_the_drive(compose_config):
@@ -50,23 +70,24 @@ def test_a_look_changes_the_appearance_not_the_drive(compose_config):
 @pytest.mark.parametrize("track", ["grass_track", "none", "ruts"])
 def test_a_track_of_the_grass_colour_differs_from_it_only_by_wear(compose_config, track):
     cfg = compose_config(*SMALL).world
-    seed = next(s for s in range(500) if draw_appearance(s, [dict(c) for c in cfg.appearance.held_out]).track == track)
-    world = build_world(cfg, seed)
+    seed = next(s for s in range(500) if draw_appearance(s, [dict(c) for c in cfg.appearance.held_out], "full_variety").track == track)
+    world = build_world(cfg, seed, "full_variety")
     np.testing.assert_array_equal(world.palette[DIRT], world.palette[GRASS])
     assert (world.wear is None) == (track == "none")
     if world.wear is not None:  # ruts only on the track's cells
         assert world.wear.any() and not world.wear[world.materials != DIRT].any()
 
 
-def test_conditions_name_each_world_look_and_the_test_set_needs_the_look_groups(compose_config):
+def test_conditions_name_each_world_look_and_the_stress_sets_draw_theirs(compose_config):
     cfg = compose_config(*SMALL).world
-    world = build_world(cfg, 3, held_out_look=True)
+    world = build_world(cfg, 3, "held_out")
     rows = frame_conditions(world, cfg)
     assert {r["look"] for r in rows} == {"held_out"} and {r["track"] for r in rows} == {world.look.track}
-    assert "held_out_look" in required_groups(cfg) and held_out_look(cfg, 1) and not held_out_look(cfg, 2)
-    plain = compose_config(*SMALL, "world.appearance.enabled=false").world
-    assert not {"grass_track", "no_track", "held_out_look"} & set(required_groups(plain))
-    assert {key for key, _, _ in GROUPS} >= {"shadow_water", "dappled", "grass_track", "no_track", "seen_look", "held_out_look"}
+    outside = next(s for s in range(100) if build_world(cfg, s, "full_variety").look.outside)
+    assert {r["look"] for r in frame_conditions(build_world(cfg, outside, "full_variety"), cfg)} == {"outside"}
+    assert STRESS_DRAWS == {"held_out_look": "held_out", "outside_look": "full_variety"}
+    keys = {key for key, _, _ in GROUPS}
+    assert keys >= {"shadow_water", "dappled", "grass_track", "no_track", "seen_look", "held_out_look", "outside_look"}
 
 
 def test_auto_gain_brings_the_mean_luminance_to_the_target_and_sky_does_not_blur():
@@ -118,13 +139,13 @@ def test_a_dressed_world_renders_through_its_sensor(compose_config):
     assert a.image.shape == (36, 64, 3) and a.image.std() > 5
 
 
-def test_held_out_looks_section_by_hand(tmp_path):
-    """Two seen worlds and two held-out ones, one frame each, one run with two seeds: the section's IoU
-    on each kind of look and their difference, counted by hand."""
+def test_stress_sets_section_by_hand(tmp_path):
+    """Two main worlds and two stress worlds (held-out looks), one frame each, one run with two seeds: the
+    section scores only the stress frames, each against the prior, counted by hand."""
     from offroad_path.data.manifest import Sample
     from offroad_path.evaluation.bootstrap import Resampling
-    from offroad_path.evaluation.looks import HeldOutLooks
     from offroad_path.evaluation.report import TestSet
+    from offroad_path.evaluation.stress import StressSets
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
     from offroad_path.world.conditions import COLUMNS
 
@@ -135,16 +156,19 @@ def test_held_out_looks_section_by_hand(tmp_path):
         row |= {"track": "dirt", "light": "clear", "look": look, "canopy": "open"}
         (tmp_path / name / "conditions.csv").write_text(",".join(COLUMNS) + "\n" + ",".join(str(row[c]) for c in COLUMNS) + "\n")
         samples.append(Sample(name, 0, False, str(tmp_path / name / "image_l" / "000000.png"), "", "", "", 1.0, 0.1))
-    # [tp, fp, tn, fn] per frame and seed: seen tp 14, fp 3, fn 3: IoU 14 / 20; held out tp 6, fp 9, fn 5: 6 / 20.
+    # [tp, fp, tn, fn] per frame and seed: the stress frames (c, d) tp 6, fp 9, fn 5: IoU 6 / 20.
     seed0 = np.array([[4, 1, 10, 1], [3, 1, 10, 1], [1, 2, 10, 2], [2, 2, 10, 1]], float)
     seed1 = np.array([[4, 1, 10, 0], [3, 0, 10, 1], [1, 3, 10, 0], [2, 2, 10, 2]], float)
     labels = np.zeros((4, 2, 2), bool)
-    test = TestSet(["unet-none"], [0, 1], samples, labels, {}, {}, {("unet-none", "no"): [seed0, seed1]}, {}, {}, {}, labels[0], 0.5)
-    test.__dict__["prior_counts"] = np.array([[1, 1, 10, 1]] * 4, float)  # the cached property, by hand: IoU 1/3 on both
-    section = HeldOutLooks(HierarchicalBootstrap([(s.sequence, 0) for s in samples], Resampling(500, 0)))
+    sets = np.array(["main", "main", "held_out_look", "held_out_look"], dtype=object)
+    test = TestSet(["unet-none"], [0, 1], samples, labels, {}, {}, {("unet-none", "no"): [seed0, seed1]}, {}, {}, {}, labels[0], 0.5,
+                   sets=sets)  # fmt: skip
+    test.__dict__["prior_counts"] = np.array([[1, 1, 10, 1]] * 4, float)  # the cached property, by hand: IoU 1/3
+    section = StressSets(lambda part: HierarchicalBootstrap([(s.sequence, 0) for s in part], Resampling(500, 0)))
     section.score(test)
-    seen, held, loss = section.rows["unet-none"]
-    assert seen == pytest.approx(14 / 20) and held == pytest.approx(6 / 20) and loss.estimate == pytest.approx(6 / 20 - 14 / 20)
-    assert loss.low <= loss.estimate <= loss.high
-    assert section.rows["mean_path_prior"][2].estimate == pytest.approx(0.0)
-    assert section.worlds == (2, 2) and "Held-out appearance" in section.markdown()
+    row = section.metrics()["stress_sets"]["held_out_look"]
+    assert (row["worlds"], row["frames"]) == (2, 2) and row["mean_path_prior"] == pytest.approx(1 / 3)
+    net = row["unet-none"]
+    assert net["iou"] == pytest.approx(6 / 20) and net["minus_prior"] == pytest.approx(6 / 20 - 1 / 3, abs=1e-6)
+    assert net["low"] <= net["minus_prior"] <= net["high"]
+    assert "| a look no training drive shows (world.appearance.held_out) | 2 | 2 | 0.333 |" in section.markdown()

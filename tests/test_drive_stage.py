@@ -28,7 +28,7 @@ def inputs(compose_config, trained, tmp_path_factory) -> Path:
     from offroad_path.world.record import record_sequence
 
     root = tmp_path_factory.mktemp("drive_inputs")
-    record_sequence(compose_config(*SMALL_WORLD).world, seed=5, out_dir=root / "synthetic" / "test_000", held_out=True)
+    record_sequence(compose_config(*SMALL_WORLD).world, seed=5, out_dir=root / "synthetic" / "test_000", test_set="main")
     checkpoint = root / "runs" / "unet-none" / "seed0" / "checkpoints" / "best.ckpt"
     checkpoint.parent.mkdir(parents=True)
     shutil.copy(trained[0], checkpoint)

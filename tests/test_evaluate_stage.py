@@ -123,20 +123,69 @@ def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path
     difference = found["unet-none_vs_fcn-none"]
     assert difference["iou_difference"] == pytest.approx(1 - rows[2].iou, abs=1e-6) and difference["low"] > 0
     assert set(found) == {"test_set", "unet-none.raw", "unet-none.postprocessed", "fcn-none.raw", "fcn-none.postprocessed",
+                          "unet-none_vs_mean_path_prior", "fcn-none_vs_mean_path_prior", "every_scratch_run_vs_mean_path_prior",
                           "unet-none_vs_fcn-none", "unet-none_postprocessed_vs_raw", "fcn-none_postprocessed_vs_raw"}  # fmt: skip
     report = (tmp_path / "evaluation" / "results.md").read_text()
     assert "## Uncertainty" in report and "| U-Net (none) - FCN (none) |" in report
     assert found["test_set"]["worlds"] == 1  # one rendered drive: its blocks are resampled within it
-    # The primaries this run makes (U-Net's post-processing, U-Net against PilotNet open loop), each at
-    # Holm's 7 levels around the same estimate as its comparison; the others (runs not evaluated): not measured.
+    # The primaries this run makes (the central claim over the two runs without pretraining, U-Net's
+    # post-processing, U-Net against PilotNet open loop), each at Holm's 8 levels around the same estimate
+    # as its comparison; the others (runs not evaluated): not measured.
     primaries = json.loads((tmp_path / "metrics.json").read_text())["primaries"]
-    assert set(primaries) == {"postprocessing", "open_loop"}
+    assert set(primaries) == {"central_claim", "postprocessing", "open_loop"}
     assert primaries["open_loop"]["estimate"] == pytest.approx(against["mae_difference"], abs=1e-6)
     assert primaries["postprocessing"]["estimate"] == pytest.approx(found["unet-none_postprocessed_vs_raw"]["iou_difference"], abs=1e-6)
     for entry in primaries.values():
         levels = entry["intervals"]
-        assert len(levels) == 7 and all(a[0] >= b[0] and a[1] <= b[1] for a, b in itertools.pairwise(levels))
+        assert len(levels) == 8 and all(a[0] >= b[0] and a[1] <= b[1] for a, b in itertools.pairwise(levels))
     assert "## Primary questions" in report and "| ranking |" in report and "not measured" in report
+
+
+def test_the_central_claim_rests_on_the_weakest_network_against_the_prior(scored, tmp_path):
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    found, prior = metrics["uncertainty"], metrics["baselines"]["mean_path_prior"]["iou"]
+    # each network without pretraining minus the prior painted on every test frame, paired
+    for run in ("unet-none", "fcn-none"):
+        assert found[f"{run}_vs_mean_path_prior"]["iou_difference"] == pytest.approx(metrics[run]["raw"]["iou"] - prior, abs=1e-6)
+    assert found["unet-none_vs_mean_path_prior"]["low"] > 0  # the labels themselves beat any one path
+    # the intersection-union test is the weaker one's: the shifted maps, below the perfect ones
+    weakest = found["fcn-none_vs_mean_path_prior"]
+    assert found["every_scratch_run_vs_mean_path_prior"] == weakest
+    assert metrics["primaries"]["central_claim"]["estimate"] == pytest.approx(weakest["iou_difference"], abs=1e-6)
+    report = (tmp_path / "evaluation" / "results.md").read_text()
+    assert "every network without pretraining - mean path prior (intersection-union: the weakest, fcn-none)" in report
+
+
+def test_a_stress_set_is_scored_on_its_own_and_kept_out_of_the_main_figures(compose_config, split_dir, tmp_path):
+    """The test drive's meta.json made a stress world of the `all` group, beside the same drive as the main
+    set: its frames leave every main figure and get a row of their own against the prior."""
+    from offroad_path.evaluation.report import TestSet
+    from offroad_path.evaluation.stress import StressSets
+    from offroad_path.evaluation.uncertainty import test_bootstrap
+
+    samples = read_manifest(split_dir / "test.csv")
+    labels = load_labels(samples).astype(np.float32)
+    write_run(compose_config, split_dir, tmp_path, "unet-none", 0, labels)
+    cfg = stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none]", "evaluate.bootstrap.resamples=200")
+    every = TestSet.read(cfg.evaluate)
+    assert list(every.sets) == ["main"] * len(samples) and every.main.all()  # a meta.json without test_set: main
+    half = len(samples) // 2
+    every.sets = np.array(["main"] * half + ["all"] * (len(samples) - half), dtype=object)
+    main = every.subset(every.main)
+    assert main.samples == samples[:half] and main.labels.shape[0] == half and main.seed_counts["unet-none", "no"][0].shape == (half, 4)
+    assert (main.prior == every.prior).all()  # the training set's prior, whatever the test frames
+    stress = StressSets(lambda part: test_bootstrap(cfg.evaluate, part, 1.0))
+    stress.score(every)
+    row = stress.metrics()["stress_sets"]["all"]
+    assert row["frames"] == len(samples) - half and row["worlds"] == 1
+    part = every.subset(~every.main)
+    assert row["mean_path_prior"] == pytest.approx(pooled(part.prior_counts).iou, abs=1e-6)
+    assert row["unet-none"]["iou"] == 1.0 and row["unet-none"]["minus_prior"] == pytest.approx(1.0 - row["mean_path_prior"], abs=1e-6)
+    assert row["unet-none"]["low"] <= row["unet-none"]["minus_prior"] <= row["unet-none"]["high"]
+    assert "## Stress sets" in stress.markdown() and "| all test frames | 1 |" in stress.markdown()
+    main_only = StressSets(lambda part: test_bootstrap(cfg.evaluate, part, 1.0))
+    main_only.score(main)
+    assert main_only.markdown() == "" and main_only.metrics() == {}
 
 
 def test_outputs_follow_the_contract(scored, tmp_path):

@@ -1,4 +1,4 @@
-"""Held-out test worlds: drawn from a seed stream of their own, kept while they add blocks or conditions."""
+"""Held-out test worlds: a main test set drawn as the training drives are, and stress sets drawn to show each hard case."""
 
 from __future__ import annotations
 
@@ -6,14 +6,16 @@ import pytest
 
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
-from offroad_path.world.held_out import MIN_FRAMES, choose_held_out_worlds, held_out_seed, survey
+from offroad_path.world.held_out import MIN_FRAMES, choose_held_out_worlds, held_out_seed, stress_seed, survey
 from offroad_path.world.record import sequence_seed
 from offroad_path.world.scene import build_world
 
 
 def test_test_world_seeds_are_never_training_seeds():
     training = {sequence_seed(0, i) for i in range(1000)}
-    assert not training & {held_out_seed(0, i) for i in range(1000)}
+    tests = {held_out_seed(0, i) for i in range(1000)}
+    stress = {stress_seed(0, name, i) for name in ("dappled", "off_track") for i in range(1000)}
+    assert not training & tests and not (training | tests) & stress and len(stress) == 2000
 
 
 @pytest.mark.slow(seconds=7)
@@ -30,26 +32,46 @@ def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config
     assert "all" in groups and len(groups) < len(GROUPS)  # one world does not show everything
 
 
-@pytest.mark.slow(seconds=36)
-def test_the_chosen_worlds_show_every_group_and_each_adds_one_lacking(compose_config):
-    c = compose_config("synthesize.test_worlds.per_condition=1", "synthesize.test_worlds.min_blocks=1").synthesize.test_worlds
+@pytest.mark.slow(seconds=40)
+def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case(compose_config):
+    c = compose_config(
+        "synthesize.test_worlds.min_blocks=5", "synthesize.test_worlds.per_stress=1",
+        "synthesize.test_worlds.stress_sets=[dappled,held_out_look,outside_look]",
+    ).synthesize.test_worlds  # fmt: skip
     cfg = compose_config().world
     chosen = choose_held_out_worlds(cfg, c, master_seed=0, workers=2)
-    assert {k for w in chosen for k in w.groups} == {k for k, _, _ in GROUPS}
-    assert [w.index for w in chosen] == sorted(w.index for w in chosen) and chosen[0].index == 0
-    for i, world in enumerate(chosen[1:], start=1):
-        shown = {k for w in chosen[:i] for k in w.groups}
-        assert set(world.groups) - shown  # kept only for a group the earlier ones lack
-    assert [w.name for w in chosen][:1] == ["test_000"]
-    assert all(w.seed == held_out_seed(0, w.index) for w in chosen)
+    main = [w for w in chosen if w.test_set == "main"]
+    # the main set: the first candidates in seed order, until the blocks are there, whatever they show
+    assert [w.index for w in main] == list(range(len(main))) and sum(w.blocks for w in main[:-1]) < 5 <= sum(w.blocks for w in main)
+    assert all(w.seed == held_out_seed(0, w.index) and w.draw == "training" and w.name == f"test_{w.index:03d}" for w in main)
+    stress = {w.test_set: w for w in chosen if w.test_set != "main"}
+    assert list(stress) == ["dappled", "held_out_look", "outside_look"]
+    for name, world in stress.items():
+        assert name in world.groups and world.seed == stress_seed(0, name, world.index) and world.name == f"stress_{name}_{world.index:03d}"
+    assert [stress[k].draw for k in stress] == ["training", "held_out", "full_variety"]
+    # every look a main or training-drawn world shows is of the training distribution
+    for world in [*main, stress["dappled"]]:
+        look = build_world(cfg, world.seed, world.draw).look
+        assert look.track not in ("grass_track", "none") and look.light != "hazy" and not look.outside
 
 
-def test_too_few_candidates_is_an_error_naming_what_is_lacking(compose_config):
+def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog):
+    c = compose_config("synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.stress_sets=[outside_look]").synthesize.test_worlds
+    weights = "world.appearance.weights"
+    every = compose_config(f"{weights}.track.grass_track=1.0", f"{weights}.track.none=1.0", f"{weights}.light.hazy=1.0").world
+    chosen = choose_held_out_worlds(every, c, master_seed=0, workers=1)
+    assert {w.test_set for w in chosen} == {"main"} and "stress set outside_look" in caplog.text
+
+
+def test_too_few_candidates_is_an_error_naming_the_set(compose_config):
     c = compose_config("synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50").synthesize.test_worlds
-    with pytest.raises(
-        ValueError,
-        match=r"synthesize\.test_worlds: 1 candidate worlds do not make the test set \(\d+ of 50 blocks, .*shadow in \d of 3 worlds",
-    ):
+    with pytest.raises(ValueError, match=r"synthesize\.test_worlds: 1 candidate worlds hold fewer than 50 blocks; raise max_candidates"):
+        choose_held_out_worlds(compose_config().world, c, master_seed=0, workers=1)
+    c = compose_config(
+        "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=1",
+        "synthesize.test_worlds.stress_sets=[shadow_water]", "synthesize.test_worlds.per_stress=2",
+    ).synthesize.test_worlds  # fmt: skip
+    with pytest.raises(ValueError, match=r"give stress set shadow_water [01] of 2 worlds; raise max_candidates or lower per_stress"):
         choose_held_out_worlds(compose_config().world, c, master_seed=0, workers=1)
     none = compose_config("synthesize.test_worlds.min_blocks=0").synthesize.test_worlds
     assert choose_held_out_worlds(compose_config().world, none, master_seed=0) == []

@@ -106,9 +106,34 @@ def test_every_trained_network_writes_one_folder_per_seed_and_evaluate_reads_the
     assert cfg.steering.plots_path.endswith("metrics/steering/seed2_scatter.csv")
     curvature = compose_config("seed=2", "steering.target=curvature").steering
     assert (curvature.out_dir, curvature.metrics_path) == ("data/steering_curvature/seed2", "metrics/steering_curvature/seed2.json")
-    # The drive and evaluate's path-against-steering section read every seed of evaluate.seeds: {seed} in their paths.
-    assert list(cfg.drive.seeds) == [0, 1, 2]
+    # The drive reads evaluate.drive_seeds (the laptop: seed 0), evaluate's path-against-steering section every seed: {seed} in their paths.
+    assert list(cfg.drive.seeds) == [0] and list(compose_config("experiment=gpu").drive.seeds) == [0, 1, 2]
     for name, folder in (("pilotnet", "steering"), ("pilotnet_slip", "steering_slip"), ("pilotnet_curvature", "steering_curvature")):
         assert cfg.drive.pilotnets[name] == f"data/{folder}/seed{{seed}}/checkpoints/best.ckpt"
     assert cfg.evaluate.steering_from_paths.pilotnet_predictions == "data/steering/seed{seed}/predictions.csv"
-    assert list(compose_config("evaluate.seeds=[3,4]").drive.seeds) == [3, 4]
+    assert list(compose_config("evaluate.drive_seeds=[3,4]").drive.seeds) == [3, 4]
+
+
+def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc_yaml(compose_config):
+    """experiment=gpu: every look alike, ten times the drives, full-width networks on larger inputs, every core
+    working; gpu/dvc.yaml is dvc.yaml's stages under it (made by utils.scaled_pipeline), its grid gpu/params.yaml."""
+    import yaml
+
+    from offroad_path.utils.scaled_pipeline import ROOT, render
+    from offroad_path.world.appearance import axis_values
+
+    laptop, gpu = compose_config(), compose_config("experiment=gpu")
+    assert all(gpu.world.appearance.weights[axis][value] > 0 for axis in gpu.world.appearance.weights for value in axis_values()[axis])
+    assert gpu.synthesize.sequences >= 10 * laptop.synthesize.sequences and gpu.model.width == 1.0
+    assert gpu.data.width * gpu.data.height > laptop.data.width * laptop.data.height and gpu.data.num_workers > 0
+    assert gpu.threads == "all" and gpu.synthesize.workers == gpu.label.workers == gpu.drive.workers == 0  # 0: one per core
+    assert {"no_track", "grass_track"} <= set(gpu.synthesize.test_worlds.stress_sets)  # in its training distribution
+    assert (ROOT / "gpu" / "dvc.yaml").read_text() == render(), "gpu/dvc.yaml is stale: python -m offroad_path.utils.scaled_pipeline"
+    pipeline, main = yaml.safe_load(render()), yaml.safe_load((ROOT / "dvc.yaml").read_text())
+    assert list(pipeline["stages"]) == list(main["stages"])
+    for name, stage in pipeline["stages"].items():
+        assert "experiment=gpu paths.root=gpu" in stage["cmd"] and stage["wdir"] == ".."
+        outputs = [next(iter(o)) if isinstance(o, dict) else o for key in ("outs", "metrics") for o in stage.get(key, [])]
+        assert outputs and all(o.startswith(("gpu/data/", "gpu/metrics/")) for o in outputs), name
+    grid = yaml.safe_load((ROOT / "gpu" / "params.yaml").read_text())
+    assert {key: list(gpu.evaluate[key]) for key in grid} == grid

@@ -108,6 +108,27 @@ LOOKS = {
 }
 
 
+def _valid_weights(weights: Any) -> bool:
+    from offroad_path.world.appearance import axis_values  # numpy only
+
+    axes = axis_values()
+    return all(
+        axis in axes
+        and set(values) <= set(axes[axis])
+        and all(isinstance(w, int | float) and w >= 0 for w in values.values())
+        and sum(values.values()) > 0
+        for axis, values in weights.items()
+    )
+
+
+WEIGHTS = {
+    "rule": Rule(
+        _valid_weights,
+        "must map axes (track, season, light, vegetation) to {value: weight >= 0} with a positive weight on each axis",
+    )
+}
+
+
 @dataclass
 class AppearanceConfig:
     """Each world's look drawn from a stream of its own (offroad_path.world.appearance)."""
@@ -115,6 +136,9 @@ class AppearanceConfig:
     enabled: bool = MISSING  # false: the single look of the worlds before issue 44, byte for byte
     # Looks no training drive shows; every other test world is drawn from them (the held-out-appearance test set).
     held_out: list[dict[str, str]] = setting(LOOKS)
+    # The training distribution: per axis, each value's weight (absent or 0: no training drive shows it); an
+    # axis not listed draws its values alike. The stress set `outside_look` draws from every value alike.
+    weights: dict[str, Any] = setting(WEIGHTS)  # Any: OmegaConf cannot merge a typed dict of dicts
 
 
 @dataclass
@@ -150,8 +174,10 @@ class WorldConfig:
 
 @dataclass
 class TestWorldsConfig:
-    min_blocks: int = setting(at_least(0))  # 0: no test worlds (the split takes test blocks from the drives)
-    per_condition: int = setting(at_least(0))  # test worlds that must show each condition group
+    min_blocks: int = setting(at_least(0))  # the main test set's blocks; 0: no test worlds (the split takes test blocks from the drives)
+    # Stress sets (offroad_path.world.held_out): condition groups (offroad_path.world.groups.GROUPS), each reported on its own.
+    stress_sets: list[str] = setting(each(one_of(registry("world.groups", "GROUP_KEYS"))))
+    per_stress: int = setting(at_least(0))  # worlds per stress set
     block_m: float = setting(positive())
     horizon_m: float = MISSING  # the last metres of a drive, which get no label (label.distance_m, whose rule checks it)
     max_candidates: int = setting(at_least(1))
@@ -371,6 +397,7 @@ class TrainerConfig:
 
     _target_: str = MISSING
     max_epochs: int = setting(at_least(1))
+    max_time: str | None = MISSING  # "DD:HH:MM:SS": stop after this wall time (null: no limit)
     accelerator: str = MISSING
     devices: str = MISSING
     strategy: str = MISSING  # ddp across GPUs (trainer=ddp)
@@ -460,6 +487,7 @@ class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
     seeds: list[int] = setting(each(at_least(0)))  # training seeds of every run: data/runs/<run>/seed<k>
+    drive_seeds: list[int] = setting(each(at_least(0)))  # the closed loop's (drive.seeds; the slip and curvature PilotNets')
     runs: list[str] = MISSING  # <architecture>-<pretraining>; conf/ takes the grid of the two lists
     runs_dir: str = MISSING  # <run>/predictions from train
     postprocessed_dir: str = MISSING  # <run>/ from postprocess

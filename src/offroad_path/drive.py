@@ -84,7 +84,7 @@ def run_drive(cfg: DictConfig) -> dict:
             WorldJob(w, cfg.world, drive, tuple(drive.seeds), params, cfg.label.disparity, str(tmp), drive.video and i == 0)
             for i, w in enumerate(worlds)
         ]
-        results = map_processes(drive_world, jobs, drive.workers, [f"test world {w.folder}" for w in worlds])
+        results = map_processes(drive_world, jobs, drive.workers, [f"test world {w.folder}" for w in worlds], "drive")
         logs: dict[str, dict[str, list[DriveLog]]] = {argument: {} for argument in drive.arguments}
         for per_world in results:
             for argument, g in per_world:

@@ -23,6 +23,7 @@ from offroad_path.data.manifest import manifest_folders
 from offroad_path.evaluation.tables import ResultRow, split_run_name
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.outputs import Outputs
+from offroad_path.utils.progress import Progress
 from offroad_path.utils.tracking import stage_run, tracking_uri
 
 if TYPE_CHECKING:
@@ -55,7 +56,6 @@ def outputs(cfg: DictConfig) -> Outputs:
 @reads("evaluate", "label", "split", "mlflow", writes=outputs)
 def evaluate(cfg: DictConfig) -> list[ResultRow]:
     # The work's modules (torch among them) once the config and outputs are checked: a refusal is fast.
-    from offroad_path.evaluation.looks import HeldOutLooks
     from offroad_path.evaluation.report import TestSet, write_report
     from offroad_path.evaluation.sections import (
         Baselines,
@@ -66,11 +66,15 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
         SteeringFromPaths,
         Temporal,
     )
+    from offroad_path.evaluation.stress import StressSets
     from offroad_path.evaluation.uncertainty import Uncertainty, test_bootstrap
 
     evaluate_cfg = cfg.evaluate
     check_primaries(evaluate_cfg)
-    test = TestSet.read(evaluate_cfg)
+    every = TestSet.read(evaluate_cfg)
+    test = every.subset(every.main)  # the main test set: every figure but the stress sets'
+    stress = StressSets(lambda samples: test_bootstrap(evaluate_cfg, samples, cfg.split.block_m))
+    stress.score(every)
     results = ResultsTable()
     bootstrap = test_bootstrap(evaluate_cfg, test.samples, cfg.split.block_m)
     uncertainty, steering = Uncertainty(bootstrap, cfg.split.block_m), SteeringFromPaths(evaluate_cfg, bootstrap)
@@ -82,12 +86,16 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
         steering,
         PrimaryQuestions(evaluate_cfg, uncertainty, steering),
         ByCondition(bootstrap),
-        HeldOutLooks(bootstrap),
+        stress,
         Temporal(evaluate_cfg, cfg.label, cfg.split.block_m),
         RealFootage(evaluate_cfg, bootstrap, cfg.split.block_m, cfg.label.distance_m),
     ]
+    progress = Progress("evaluate", len(sections), "sections")
     for section in sections:
-        section.score(test)
+        if section is not stress:
+            section.score(test)
+        progress.done(type(section).__name__)
+    progress.close()
     write_report(evaluate_cfg, test, sections, results.table(), results.figures(test, evaluate_cfg.figure_cases, evaluate_cfg.figure_scale))
     log_to_mlflow(cfg, sections, results.table())
     return results.table()
@@ -97,9 +105,11 @@ def check_primaries(e: DictConfig) -> None:
     """Each primary names a comparison that can exist (before any work); one this run does not make
     (evaluate.runs without its runs) is reported as not measured."""
     from offroad_path.evaluation.primaries import check_declared
-    from offroad_path.evaluation.uncertainty import comparisons
+    from offroad_path.evaluation.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
 
-    keys = {"uncertainty": {key for key, *_ in comparisons(list(e.runs))}, "steering_from_paths": {f"{run}_vs_pilotnet" for run in e.runs}}
+    pairs = comparisons(list(e.runs))
+    scratch = {EVERY_SCRATCH_VS_PRIOR} if any(key.endswith("_vs_mean_path_prior") for key, *_ in pairs) else set()
+    keys = {"uncertainty": {key for key, *_ in pairs} | scratch, "steering_from_paths": {f"{run}_vs_pilotnet" for run in e.runs}}
     for name in check_declared(e.conclusions.primaries, keys):
         log.warning("primary %s (%s) is not among this run's comparisons: not measured", name, e.conclusions.primaries[name].compare)
 

@@ -146,7 +146,7 @@ def label(cfg: DictConfig) -> dict:
             summaries = [summary for _, summary in merged]
         else:
             jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
-            summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots])
+            summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots], "label")
         metrics = run_metrics(summaries, in_dir, need_labels=not sharded(cfg))
         if metrics.get("one_camera_sequences"):
             log.warning(

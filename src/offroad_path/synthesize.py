@@ -32,10 +32,11 @@ def synthesize(cfg: DictConfig) -> list[dict]:
         synthesize_cfg = cfg.synthesize
         held_out = choose_held_out_worlds(cfg.world, synthesize_cfg.test_worlds, synthesize_cfg.seed, synthesize_cfg.workers)
         drives = [(f"seq_{i:03d}", sequence_seed(synthesize_cfg.seed, i), False) for i in range(synthesize_cfg.sequences)]
-        drives += [(w.name, w.seed, True, w.held_out_look) for w in held_out]
+        drives += [(w.name, w.seed, True, w.draw, w.test_set) for w in held_out]
         summaries = record_sequences(cfg.world, drives, tmp, synthesize_cfg.workers)
         tested = [
-            {"name": w.name, "blocks": w.blocks, "condition_groups": list(w.groups), "held_out_look": w.held_out_look} for w in held_out
+            {"name": w.name, "test_set": w.test_set, "blocks": w.blocks, "condition_groups": list(w.groups), "look_draw": w.draw}
+            for w in held_out
         ]
         report = {"classes": list(CLASS_NAMES), "sequences": summaries, "test_worlds": tested}
         (tmp / "summary.json").write_text(json.dumps(report, indent=2) + "\n")

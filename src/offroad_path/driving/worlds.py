@@ -46,7 +46,7 @@ class TestWorld:
 
 
 def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
-    """The held-out test worlds (meta.json's "split": "test"), in name order, the first `limit`."""
+    """The main test set's held-out test worlds (meta.json's "split": "test", no stress set), in name order, the first `limit`."""
     found = []
     for meta_path in sorted(synthetic_dir.glob("*/meta.json")):
         try:
@@ -55,7 +55,7 @@ def test_worlds(synthetic_dir: Path, limit: int | None) -> list[TestWorld]:
             raise InputError(meta_path, f"cannot be read as JSON ({type(e).__name__}: {e})") from e
         if not isinstance(recorded, dict):
             raise InputError(meta_path, "is not a JSON object")
-        if meta.held_out(recorded, meta_path):
+        if meta.held_out(recorded, meta_path) and meta.test_set(recorded) == meta.MAIN:
             if not isinstance(recorded.get("seed"), int):
                 raise InputError(
                     meta_path, 'has no integer "seed": the drive stage rebuilds a test world from the seed synthesize recorded'

@@ -20,6 +20,7 @@ from offroad_path.errors import InputError
 from offroad_path.evaluation.figures import save_png
 from offroad_path.evaluation.metrics import counts, mean_path, precision_recall_curve
 from offroad_path.evaluation.tables import csv_text
+from offroad_path.sequence import meta as meta_keys
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -45,13 +46,20 @@ class TestSet:
     prior: np.ndarray  # (H, W) bool: the mean training label above the threshold
     threshold: float  # path where confidence > threshold (evaluate.threshold)
     colour: np.ndarray | None = None  # (N, H, W) float32: the colour baseline's path probability (evaluation.colour); None: off
+    sets: np.ndarray | None = None  # (N,) each sample's test set (test_sets): main or a stress set's name
+
+    @property
+    def main(self) -> np.ndarray:
+        """(N,) bool: the samples of the main test set (a recording that names no test set is in it)."""
+        sets = np.full(len(self.samples), meta_keys.MAIN, dtype=object) if self.sets is None else self.sets
+        return sets == meta_keys.MAIN
 
     @classmethod
     def read(cls, e: DictConfig) -> TestSet:
         """Every run of evaluate.runs at every seed of evaluate.seeds, raw (train) and post-processed;
         all must list the same samples."""
         samples: list[Sample] = []
-        labels = np.zeros(0)
+        labels, sets, main = np.zeros(0), np.zeros(0, dtype=object), np.zeros(0, bool)
         paths, per_seed, predicted, curves = {}, {}, {}, {}
         seed_predicted: dict[str, list[np.ndarray]] = {}
         for run in e.runs:
@@ -72,6 +80,8 @@ class TestSet:
                     samples = [s for s, _ in rows]
                     if not len(labels):
                         labels = load_labels(samples)
+                        sets = test_sets(samples)
+                        main = sets == meta_keys.MAIN
                     maps = load_maps([p for _, p in rows])
                     per_seed.setdefault((run, pp), []).append(counts(maps, labels, e.threshold))
                     if pp == "no":
@@ -80,7 +90,7 @@ class TestSet:
                         paths[run, pp] = [p for _, p in rows]
                         if pp == "no":
                             predicted[run] = seed_predicted[run][0]
-                            curves[run] = precision_recall_curve(maps, labels, e.pr_thresholds)
+                            curves[run] = precision_recall_curve(maps[main], labels[main], e.pr_thresholds)  # the main test set's
         train = read_manifest(e.train_manifest)
         prior = mean_path(load_labels(train)) > e.threshold
         colour = _colour_maps(e, train, samples, labels.shape[1:])
@@ -99,7 +109,33 @@ class TestSet:
             prior,
             e.threshold,
             colour,
+            sets,
         )
+
+    def subset(self, keep: np.ndarray) -> TestSet:
+        """The same runs on the samples where `keep` (N,) holds: a test set of its own (the prior stays the training set's)."""
+        index = np.flatnonzero(keep)
+        paths = {key: [files[i] for i in index] for key, files in self.paths.items()}
+        part = TestSet(
+            self.runs,
+            self.seeds,
+            [self.samples[i] for i in index],
+            self.labels[index],
+            paths,
+            {key: c[index] for key, c in self.counts.items()},
+            {key: [c[index] for c in seeds] for key, seeds in self.seed_counts.items()},
+            {run: p[index] for run, p in self.predicted.items()},
+            {run: [p[index] for p in seeds] for run, seeds in self.seed_predicted.items()},
+            self.curves,
+            self.prior,
+            self.threshold,
+            None if self.colour is None else self.colour[index],
+            None if self.sets is None else self.sets[index],
+        )
+        for cached in ("prior_counts", "colour_counts"):  # computed once, on the whole test set
+            if cached in self.__dict__:
+                part.__dict__[cached] = None if self.__dict__[cached] is None else self.__dict__[cached][index]
+        return part
 
     def checkpoint(self, runs_dir: str | Path, run: str) -> Path:
         """The network of `run` that sections run on frames of their own (its first seed's)."""
@@ -114,6 +150,17 @@ class TestSet:
     def colour_counts(self) -> np.ndarray | None:
         """(N, 4) per-image counts of the colour baseline (None when evaluate.colour_baseline_pixels is 0)."""
         return None if self.colour is None else counts(self.colour, self.labels, self.threshold)
+
+
+def test_sets(samples: list[Sample]) -> np.ndarray:
+    """(N,) each sample's test set: its recording's meta.json "test_set" (main when it has none or no meta.json)."""
+    found: dict[Path, str] = {}
+    for sample in samples:
+        root = Path(sample.image).parents[1]
+        if root not in found:
+            path = root / "meta.json"
+            found[root] = meta_keys.test_set(json.loads(path.read_text())) if path.is_file() else meta_keys.MAIN
+    return np.array([found[Path(s.image).parents[1]] for s in samples], dtype=object)
 
 
 def _colour_maps(e: DictConfig, train: list[Sample], test: list[Sample], shape: tuple[int, int]) -> np.ndarray | None:

@@ -6,6 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 SPLIT, HELD_OUT = "split", "test"  # a held-out test world says "split": "test"; other recordings say nothing
+# A held-out test world's test set: "main" (drawn from the training drives' distribution, the headline
+# figures) or the stress set it was drawn for (offroad_path.world.held_out.STRESS_SETS); absent: main.
+TEST_SET, MAIN = "test_set", "main"
 GENERATOR = "generator"
 RENDERED = "offroad_path.world"  # the generator of the synthesize stage's sequences
 INGESTED = "offroad_path.ingest"  # the generator of the ingest stage's sequences
@@ -25,6 +28,11 @@ def held_out(meta: dict, path: Path | str) -> bool:
     if meta.get(SPLIT, HELD_OUT) != HELD_OUT:
         raise ValueError(f'{path}: "{SPLIT}" is {meta[SPLIT]!r}; the only value it may take is "{HELD_OUT}" (a held-out test world)')
     return SPLIT in meta
+
+
+def test_set(meta: dict) -> str:
+    """The test set a held-out test world belongs to (main when meta.json does not say)."""
+    return str(meta.get(TEST_SET, MAIN))
 
 
 def rendered(meta: dict) -> bool:

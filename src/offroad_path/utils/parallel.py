@@ -21,6 +21,7 @@ from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from offroad_path.errors import InputError
+from offroad_path.utils.progress import Progress
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _ACTIVE: list[Any] = []  # worker processes of this process, for stop_workers (on SIGTERM)
@@ -158,16 +159,33 @@ def _receive(process: Any, conn: Connection, ready: set, job: str) -> Any:
     raise InputError(job, f"its worker process was {_death(process)}; nothing was written")
 
 
-def map_processes(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 0, names: Sequence[str] | None = None) -> list[Any]:
+def map_processes(
+    fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 0, names: Sequence[str] | None = None, progress: str | None = None
+) -> list[Any]:
     """[fn(job) for job in jobs], on `workers` processes (0: one per core), results in job order.
 
     `fn` should call cv2.setNumThreads(1) (one process per core). The first failing job stops the
     rest; a worker that dies raises InputError naming its job (`names`, default: its number).
+    progress: what the jobs do, for a bar (a terminal) or a log line per finished job (utils.progress).
     """
+    names = names or [f"job {i}" for i in range(len(jobs))]
+    shown = Progress(progress, len(jobs), "jobs") if progress else None
+    try:
+        return _map(fn, jobs, workers, names, shown)
+    finally:
+        if shown is not None:
+            shown.close()
+
+
+def _map(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int, names: Sequence[str], shown: Progress | None) -> list[Any]:
     workers = min(workers or os.cpu_count() or 1, len(jobs))
     if workers <= 1:
-        return [fn(job) for job in jobs]
-    names = names or [f"job {i}" for i in range(len(jobs))]
+        results_in_order = []
+        for job, name in zip(jobs, names, strict=True):
+            results_in_order.append(fn(job))
+            if shown is not None:
+                shown.done(name)
+        return results_in_order
     results: dict[int, Any] = {}
     pending = iter(range(len(jobs)))
     doing: dict[int, int] = {}  # worker -> its job
@@ -189,6 +207,8 @@ def map_processes(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 
             ready = set(wait([pool[w][1] for w in doing] + [pool[w][0].sentinel for w in doing]))
             for w in [w for w in doing if pool[w][1] in ready or pool[w][0].sentinel in ready]:
                 results[doing[w]] = _receive(*pool[w], ready, names[doing[w]])
+                if shown is not None:
+                    shown.done(names[doing[w]])
                 hand_out(w)
         return [results[i] for i in range(len(jobs))]
     finally:

@@ -10,6 +10,11 @@ Holder & Breckon name shadow across the path, water and forks as their failure c
 here add the ones real tracks have and the old world did not: a track of the surroundings' own
 colour (worn ruts only), open ground with no track at all, dappled shade, overcast and low sun,
 greyscale and noisy cameras.
+
+The training drives draw each axis with `world.appearance.weights` (a value of weight 0 is never
+drawn: the laptop default leaves out the looks its networks cannot learn in its budget); a world
+drawn with `full_variety` draws every value alike, so the stress set of looks outside the training
+distribution can be drawn beside it.
 """
 
 from __future__ import annotations
@@ -48,6 +53,7 @@ LIGHTS: dict[str, tuple] = {
 }
 VEGETATION = ("broadleaf", "conifer", "mixed", "scrub")
 AXES = ("track", "season", "light", "vegetation")
+DRAWS = ("training", "full_variety", "held_out")  # how a world's look is drawn (draw_appearance's `draw`)
 
 
 @dataclass(frozen=True)
@@ -75,25 +81,34 @@ class Appearance:
     wet: bool  # more puddles
     held_out: bool  # a combination `world.appearance.held_out` keeps out of training
     sensor: Sensor
+    outside: bool = False  # a value of weight 0 in `world.appearance.weights`: no training drive shows it
+    full_variety: bool = False  # drawn with every value alike (a stress world), not with the weights
 
     def tags(self) -> dict[str, str]:
-        """The world's look, as conditions.csv records it on every frame."""
-        return {"track": self.track, "light": self.light, "look": "held_out" if self.held_out else "seen"}
+        """The world's look, as conditions.csv records it on every frame: seen, held_out or outside."""
+        return {"track": self.track, "light": self.light, "look": "held_out" if self.held_out else "outside" if self.outside else "seen"}
 
 
 def _matches(look: dict[str, str], combination: dict[str, str]) -> bool:
     return all(look[k] == v for k, v in combination.items())
 
 
-def draw_appearance(seed: int, held_out: list[dict[str, str]], held_out_look: bool = False) -> Appearance:
-    """The look of the world drawn from `seed`: any combination but the held-out ones, or (held_out_look)
-    one of them, its other axes drawn freely."""
+def draw_appearance(
+    seed: int, held_out: list[dict[str, str]], draw: str = "training", weights: dict[str, dict[str, float]] | None = None
+) -> Appearance:
+    """The look of the world drawn from `seed`: any combination but the held-out ones, each axis by
+    `weights` (draw "training"; None or an axis it omits: every value alike) or with every value
+    alike (draw "full_variety"), or (draw "held_out") one of the held-out combinations, its other
+    axes drawn by the weights."""
+    if draw not in DRAWS:
+        raise ValueError(f"unknown look draw {draw!r}; valid: {', '.join(DRAWS)}")
     rng = np.random.default_rng(np.random.SeedSequence([seed], spawn_key=(APPEARANCE_STREAM,)))
     choices = axis_values()
-    fixed = dict(held_out[int(rng.integers(len(held_out)))]) if held_out_look and held_out else {}
+    chances = {axis: None if draw == "full_variety" else axis_chances(weights, axis) for axis in AXES}
+    fixed = dict(held_out[int(rng.integers(len(held_out)))]) if draw == "held_out" and held_out else {}
     for _ in range(1000):
-        look = {axis: fixed.get(axis) or str(rng.choice(choices[axis])) for axis in AXES}
-        if held_out_look or not any(_matches(look, c) for c in held_out):
+        look = {axis: fixed.get(axis) or str(rng.choice(choices[axis], p=chances[axis])) for axis in AXES}
+        if fixed or not any(_matches(look, c) for c in held_out):
             break
     sensor = Sensor(
         greyscale=bool(rng.uniform() < 0.25),
@@ -112,7 +127,23 @@ def draw_appearance(seed: int, held_out: list[dict[str, str]], held_out_look: bo
         wet=look["track"] == "mud" or bool(rng.uniform() < 0.2),
         held_out=bool(fixed),
         sensor=sensor,
+        outside=any(look[axis] not in training_values(weights, axis) for axis in AXES),
+        full_variety=draw == "full_variety",
     )
+
+
+def axis_chances(weights: dict[str, dict[str, float]] | None, axis: str) -> np.ndarray | None:
+    """The probability of each of the axis's values (axis_values order) under `weights`; None: all alike."""
+    if not weights or axis not in weights:
+        return None
+    w = np.array([float(weights[axis].get(value, 0.0)) for value in axis_values()[axis]])
+    return w / w.sum()
+
+
+def training_values(weights: dict[str, dict[str, float]] | None, axis: str) -> list[str]:
+    """The axis's values the training drives may show (weight above 0)."""
+    values = axis_values()[axis]
+    return values if not weights or axis not in weights else [v for v in values if weights[axis].get(v, 0.0) > 0]
 
 
 def appearance_rng(seed: int) -> np.random.Generator:

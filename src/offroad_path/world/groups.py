@@ -28,4 +28,6 @@ GROUPS: list[tuple[str, str, Callable[[dict], bool]]] = [
     ("no_track", "open ground, no visible track", lambda r: r["track"] == "none"),
     ("seen_look", "a look the training drives show", lambda r: r["look"] == "seen"),
     ("held_out_look", "a look no training drive shows (world.appearance.held_out)", lambda r: r["look"] == "held_out"),
+    ("outside_look", "a track or light the training drives never show (world.appearance.weights 0)", lambda r: r["look"] == "outside"),
 ]
+GROUP_KEYS = [key for key, _, _ in GROUPS]

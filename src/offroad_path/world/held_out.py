@@ -1,16 +1,21 @@
 """Held-out test worlds: whole drives through worlds of their own, never blocks of a training drive.
 
-A test set cut from the training drives shares their trees, light and track, and a few blocks of it
-make every by-condition figure one sequence against another. The test worlds are drawn from a seed
-stream of their own and kept, in seed order, while they add what the test set still lacks: blocks
-of labelled driving (`min_blocks` of `block_m` metres) and worlds that show each condition group
-of the report (`per_condition`, offroad_path.world.conditions.GROUPS). What a world shows is
-known before rendering (frame_conditions reads the world, not the images), so only kept worlds are
-rendered. Choosing by condition favours worlds with rare conditions: the test set is built to
-measure every group, not to mirror their frequency in the training drives.
+Two kinds, each from a seed stream of its own:
 
-Every other candidate (odd index) is drawn with a held-out look (world.appearance.held_out, which no
-training drive shows): the report compares those worlds with the others, the in-distribution ones.
+- The main test set, which the headline figures (Table 5.1, the baselines, the primaries) score:
+  worlds drawn exactly as the training drives are (world.appearance.weights), kept in seed order
+  until it holds `min_blocks` blocks of `block_m` labelled metres. It measures the claim on the
+  distribution the networks were trained for, with every condition at its natural frequency.
+- Stress sets, one per hard case of `stress_sets` (a condition group of
+  offroad_path.world.groups.GROUPS): `per_stress` worlds each, drawn for the purpose and kept when
+  they show the case on at least MIN_FRAMES labelled frames; each is reported against the mean-path
+  prior on its own, never pooled into the main figures. A stress world's look is drawn by the
+  training weights, so every look value it tests is one the training drives may show, except in
+  `held_out_look` (world.appearance.held_out's combinations, which no training drive shows) and
+  `outside_look` (every value alike, kept when one is of weight 0: the variety the default leaves out).
+
+What a world shows is known before rendering (frame_conditions reads the world, not the images), so
+only kept worlds are rendered.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from offroad_path.config import TestWorldsConfig, WorldConfig
+from offroad_path.sequence.meta import MAIN
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
@@ -28,44 +34,43 @@ from offroad_path.world.scene import build_world
 
 log = logging.getLogger(__name__)
 TEST_STREAM = 1  # the spawn key of test-world seeds: SeedSequence([master, i]) pads with zeros, so [master, 1, i] could repeat a drive's
+STRESS_STREAM = 3  # the spawn key of stress-world seeds (2 is the appearance's)
 MIN_FRAMES = 3  # labelled-range frames a world needs in a group to count as showing it
+# How a stress set's worlds draw their look (offroad_path.world.appearance.DRAWS); every other set: "training".
+STRESS_DRAWS = {"held_out_look": "held_out", "outside_look": "full_variety"}
 
 
 @dataclass(frozen=True)
 class HeldOutWorld:
-    index: int  # in the test seed stream
+    index: int  # in its set's seed stream
     seed: int
     blocks: int  # blocks of labelled driving
     groups: tuple[str, ...]  # condition groups it shows
-    held_out_look: bool = False  # drawn with one of world.appearance.held_out's looks
+    test_set: str = MAIN  # main, or the stress set it was drawn for
 
     @property
     def name(self) -> str:
-        return f"test_{self.index:03d}"
+        return f"test_{self.index:03d}" if self.test_set == MAIN else f"stress_{self.test_set}_{self.index:03d}"
+
+    @property
+    def draw(self) -> str:
+        return STRESS_DRAWS.get(self.test_set, "training")
 
 
 def held_out_seed(master_seed: int, index: int) -> int:
     return int(np.random.SeedSequence([master_seed, index], spawn_key=(TEST_STREAM,)).generate_state(1)[0])
 
 
-def held_out_look(cfg: WorldConfig, index: int) -> bool:
-    """Whether test candidate `index` is drawn with a held-out look: every other one, when there are such looks."""
-    return bool(cfg.appearance.enabled and cfg.appearance.held_out and index % 2 == 1)
+def stress_seed(master_seed: int, stress_set: str, index: int) -> int:
+    """Candidate `index` of a stress set: a stream per set, so adding a set leaves the others' worlds as they are."""
+    key = [ord(c) for c in stress_set]
+    return int(np.random.SeedSequence([master_seed, *key, index], spawn_key=(STRESS_STREAM,)).generate_state(1)[0])
 
 
-def required_groups(cfg: WorldConfig) -> list[str]:
-    """The condition groups the test set must show: the looks' groups only where the world draws looks."""
-    looks = {"shadow_water", "dappled", "grass_track", "no_track", "seen_look", "held_out_look"}
-    skip = set() if cfg.appearance.enabled else looks
-    if not (cfg.appearance.enabled and cfg.appearance.held_out):
-        skip.add("held_out_look")
-    return [key for key, _, _ in GROUPS if key not in skip]
-
-
-def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig, look_held_out: bool = False) -> tuple[int, tuple[str, ...]]:
+def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig, draw: str = "training") -> tuple[int, tuple[str, ...]]:
     """(blocks of labelled driving, condition groups shown) of the world drawn from `seed`: frames
     with `horizon_m` of drive ahead get labels; blocks start every `block_m` along the drive."""
-    world = build_world(cfg, seed, look_held_out)
+    world = build_world(cfg, seed, draw)
     s = np.asarray(world.frame_s) - world.frame_s[0]
     labelled = s <= s[-1] - c.horizon_m
     rows = [row for row, keep in zip(frame_conditions(world, cfg), labelled, strict=True) if keep]
@@ -74,43 +79,65 @@ def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig, look_held_out: bool
     return blocks, shown
 
 
-def _survey_job(args: tuple[WorldConfig, int, int, TestWorldsConfig]) -> HeldOutWorld:
-    cfg, index, seed, c = args
-    look = held_out_look(cfg, index)
-    return HeldOutWorld(index, seed, *survey(cfg, seed, c, look), held_out_look=look)
+def _survey_job(args: tuple[WorldConfig, int, int, TestWorldsConfig, str]) -> HeldOutWorld:
+    cfg, index, seed, c, test_set = args
+    return HeldOutWorld(index, seed, *survey(cfg, seed, c, STRESS_DRAWS.get(test_set, "training")), test_set=test_set)
 
 
-def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, workers: int = 0) -> list[HeldOutWorld]:
-    """The test worlds of the module docstring, surveyed `workers` at a time; ValueError when
-    `max_candidates` worlds do not make the set (naming what it lacks)."""
-    if c.min_blocks == 0:
-        return []
-    chosen: list[HeldOutWorld] = []
-    shown = dict.fromkeys(required_groups(cfg), 0)
+def _candidates(cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, test_set: str, workers: int):
+    """Surveyed candidate worlds of one set, in seed order, `workers` at a time (up to max_candidates)."""
     batch = max(1, workers or 2)
     for start in range(0, c.max_candidates, batch):
         indices = range(start, min(start + batch, c.max_candidates))
-        jobs = [(cfg, i, held_out_seed(master_seed, i), c) for i in indices]
-        for world in map_processes(_survey_job, jobs, workers, [f"test world {i}" for i in indices]):
-            lacking = [k for k, n in shown.items() if n < c.per_condition]
-            short = sum(w.blocks for w in chosen) < c.min_blocks
-            if (lacking and set(world.groups) & set(lacking)) or (not lacking and short):
-                chosen.append(world)
-                for key in set(world.groups) & shown.keys():
-                    shown[key] += 1
-            if not _lacks(chosen, shown, c):
-                log.info("test worlds: kept %d of %d drawn, %d blocks", len(chosen), world.index + 1, sum(w.blocks for w in chosen))
-                return chosen
-    missing = _lacks(chosen, shown, c)
-    raise ValueError(
-        f"synthesize.test_worlds: {c.max_candidates} candidate worlds do not make the test set ({missing}); "
-        "raise max_candidates or lower min_blocks or per_condition"
-    )
+        seeds = [held_out_seed(master_seed, i) if test_set == MAIN else stress_seed(master_seed, test_set, i) for i in indices]
+        jobs = [(cfg, i, seed, c, test_set) for i, seed in zip(indices, seeds, strict=True)]
+        yield from map_processes(_survey_job, jobs, workers, [f"{test_set} test world {i}" for i in indices])
 
 
-def _lacks(chosen: list[HeldOutWorld], shown: dict[str, int], c: TestWorldsConfig) -> str:
-    """What the chosen worlds still lack, in words; '' when nothing."""
-    blocks = sum(w.blocks for w in chosen)
-    parts = [f"{blocks} of {c.min_blocks} blocks"] if blocks < c.min_blocks else []
-    parts += [f"{k} in {n} of {c.per_condition} worlds" for k, n in shown.items() if n < c.per_condition]
-    return ", ".join(parts)
+def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, workers: int = 0) -> list[HeldOutWorld]:
+    """The main test set, then each stress set (module docstring); ValueError naming the set when
+    `max_candidates` worlds do not make it. min_blocks 0: no test worlds at all."""
+    if c.min_blocks == 0:
+        return []
+    chosen: list[HeldOutWorld] = []
+    for world in _candidates(cfg, c, master_seed, MAIN, workers):
+        chosen.append(world)
+        if sum(w.blocks for w in chosen) >= c.min_blocks:
+            break
+    else:
+        raise ValueError(
+            f"synthesize.test_worlds: {c.max_candidates} candidate worlds hold fewer than {c.min_blocks} blocks; raise max_candidates"
+        )
+    log.info("main test set: %d worlds, %d blocks", len(chosen), sum(w.blocks for w in chosen))
+    for stress_set in c.stress_sets:
+        if stress_set in STRESS_DRAWS and not _draws_differ(cfg, stress_set):
+            log.warning("stress set %s: the training distribution already draws every such look; left out", stress_set)
+            continue
+        kept = []
+        for world in _candidates(cfg, c, master_seed, stress_set, workers) if c.per_stress else ():
+            if stress_set in world.groups:
+                kept.append(world)
+                if len(kept) == c.per_stress:
+                    break
+        if len(kept) < c.per_stress:
+            raise ValueError(
+                f"synthesize.test_worlds: {c.max_candidates} candidate worlds give stress set {stress_set} "
+                f"{len(kept)} of {c.per_stress} worlds; raise max_candidates or lower per_stress"
+            )
+        log.info("stress set %s: %d worlds, %d blocks", stress_set, len(kept), sum(w.blocks for w in kept))
+        chosen += kept
+    return chosen
+
+
+def _draws_differ(cfg: WorldConfig, stress_set: str) -> bool:
+    """Whether a look-drawn stress set can hold anything: held-out looks need world.appearance.held_out,
+    looks outside the training distribution need a weight of 0 somewhere."""
+    if not cfg.appearance.enabled:
+        return False
+    if stress_set == "held_out_look":
+        return bool(cfg.appearance.held_out)
+    from offroad_path.world.appearance import AXES, training_values
+    from offroad_path.world.scene import appearance_weights
+
+    weights = appearance_weights(cfg)
+    return any(len(training_values(weights, axis)) < len(training_values(None, axis)) for axis in AXES)

@@ -49,11 +49,13 @@ def encode_depth(depth_m: np.ndarray) -> np.ndarray:
     return np.where(depth_m > 0, mm, 0).astype(np.uint16)
 
 
-def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool = False, look_held_out: bool = False) -> dict:
+def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, test_set: str | None = None, draw: str = "training") -> dict:
     """Render one sequence into out_dir; returns a summary (frames, distance, class pixel counts).
-    held_out: a test world (meta.json's "split": "test"), which the split stage keeps for testing;
-    look_held_out: drawn with one of world.appearance.held_out's looks."""
-    world = build_world(cfg, seed, look_held_out)
+    test_set: None for a training drive, else a held-out test world (meta.json's "split": "test"),
+    which the split stage keeps for testing, of that test set (meta.json's "test_set": main, or the
+    stress set it was drawn for); draw: how its look is drawn (offroad_path.world.appearance.DRAWS)."""
+    held_out = test_set is not None
+    world = build_world(cfg, seed, draw)
     camera = camera_for(cfg)
     rays = camera.rays()
     baseline = cfg.rig.baseline_m
@@ -108,7 +110,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, held_out: bool =
         "distance_m": distance,
         "frames": len(world.poses),
         "world": world_settings(cfg),  # the drive stage and the slip targets rebuild the world from these and the seed
-    } | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {})
+    } | ({meta_keys.SPLIT: meta_keys.HELD_OUT, meta_keys.TEST_SET: test_set} if held_out else {})
     if world.look is not None:  # only then: a world without a look keeps its meta.json byte for byte
         meta["appearance"] = asdict(world.look)
     if world.slip is not None:  # only then: a world without slip keeps today's meta.json byte for byte
@@ -130,17 +132,18 @@ def _shutter_metres(world: World, fps: float) -> np.ndarray:
     return speed * world.look.sensor.shutter_s
 
 
-def _record_job(args: tuple[WorldConfig, int, str, bool, bool]) -> dict:
+def _record_job(args: tuple[WorldConfig, int, str, str | None, str]) -> dict:
     cv2.setNumThreads(1)  # one process per core: no nested threading
-    cfg, seed, out_dir, held_out, look_held_out = args
-    return record_sequence(cfg, seed, Path(out_dir), held_out, look_held_out)
+    cfg, seed, out_dir, test_set, draw = args
+    return record_sequence(cfg, seed, Path(out_dir), test_set, draw)
 
 
 def record_sequences(cfg: WorldConfig, drives: list[tuple], out_dir: Path, workers: int = 0) -> list[dict]:
-    """Render each drive (name, seed, held out[, held-out look]) into out_dir/<name> in parallel, one process per worker."""
-    jobs = [(cfg, drive[1], str(out_dir / drive[0]), drive[2], drive[3] if len(drive) > 3 else False) for drive in drives]
+    """Render each drive (name, seed, held out[, look draw[, test set]]) into out_dir/<name> in parallel, one process per worker."""
+    jobs = [(cfg, d[1], str(out_dir / d[0]), (d[4] if len(d) > 4 else "main") if d[2] else None, d[3] if len(d) > 3 else "training")
+            for d in drives]  # fmt: skip
     start = time.perf_counter()
-    summaries = map_processes(_record_job, jobs, workers, [f"sequence {drive[0]}" for drive in drives])
+    summaries = map_processes(_record_job, jobs, workers, [f"sequence {drive[0]}" for drive in drives], "render")
     elapsed = time.perf_counter() - start
     frames = sum(s["frames"] for s in summaries)
     log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", len(drives), frames, elapsed, frames / elapsed)
@@ -181,13 +184,18 @@ def rebuild_world(cfg: WorldConfig, folder: Path) -> World:
     with `cfg`; a ValueError naming the folder when cfg is not the config it was rendered with."""
     meta = json.loads((folder / "meta.json").read_text())
     check_rendered_with(cfg, folder / "meta.json", meta)
-    world = build_world(cfg, int(meta["seed"]), bool(meta.get("appearance", {}).get("held_out", False)))
+    world = build_world(cfg, int(meta["seed"]), look_draw(meta.get("appearance", {})))
     if not math.isclose(path_length(world.poses), float(meta["distance_m"]), rel_tol=1e-9):
         raise ValueError(
             f"{folder}: rendered with another world config than this one (its drive is {meta['distance_m']:.3f} m, "
             f"this config's {path_length(world.poses):.3f} m); rerun synthesize"
         )
     return world
+
+
+def look_draw(appearance: dict) -> str:
+    """How a recorded world's look was drawn, from meta.json's "appearance" (offroad_path.world.appearance.DRAWS)."""
+    return "held_out" if appearance.get("held_out") else "full_variety" if appearance.get("full_variety") else "training"
 
 
 def _slip_steering_job(args: tuple[WorldConfig, str]) -> np.ndarray:

@@ -92,11 +92,12 @@ def vehicle_geometry(cfg: WorldConfig) -> VehicleGeometry:
     )
 
 
-def build_world(cfg: WorldConfig, seed: int, held_out_look: bool = False) -> World:
-    """The world drawn from `seed`; held_out_look: its appearance one of world.appearance.held_out's
+def build_world(cfg: WorldConfig, seed: int, draw: str = "training") -> World:
+    """The world drawn from `seed`; `draw`: how its appearance is drawn (world.appearance.DRAWS):
+    by world.appearance.weights, from every value alike, or one of world.appearance.held_out's
     combinations (the held-out-appearance test worlds)."""
     rng = np.random.default_rng(seed)
-    look = draw_appearance(seed, held_out_combinations(cfg), held_out_look) if cfg.appearance.enabled else None
+    look = draw_appearance(seed, held_out_combinations(cfg), draw, appearance_weights(cfg)) if cfg.appearance.enabled else None
     dress = appearance_rng(seed) if look else None
     density = rng.uniform(1 - cfg.density_jitter, 1 + cfg.density_jitter, size=4)
     frame_s = frame_arc_lengths(rng, cfg.frames, cfg.fps, (cfg.speed_min_mps, cfg.speed_max_mps))
@@ -192,6 +193,11 @@ def _apply_look(world: World, look: Appearance, dress: np.random.Generator, cfg:
 
 def held_out_combinations(cfg: WorldConfig) -> list[dict[str, str]]:
     return [dict(c) for c in cfg.appearance.held_out]
+
+
+def appearance_weights(cfg: WorldConfig) -> dict[str, dict[str, float]]:
+    """world.appearance.weights as plain dicts (a composed config's or a schema's)."""
+    return {axis: dict(values) for axis, values in (cfg.appearance.weights or {}).items()}
 
 
 def light_sky(look: Appearance, rng: np.random.Generator) -> Sky:

@@ -1,0 +1,211 @@
+"""How much driving a path network needs: its margin over the mean-path prior on the main test set
+against the number of training drives, for each setting of the training budget.
+
+    python benchmarks/learning_curve.py [--data data] [--models unet fcn] [--drives 2 4 8 16]
+        [--seeds 0 1 2] [--settings epochs steps wide] [--work DIR] [--json out.json]
+        [--figure docs/images/learning_curve.png]
+
+Run after `dvc repro` (it reads the committed run's labels and split). Nested subsets of the
+training drives of that one rendering (the first k drives by name; each subset's validation and
+test frames are the run's own), the train stage itself on each (no pretraining, the default's
+augmentation and mirrored copies), scored on the main test set (no stress world). Settings:
+
+- epochs: the default's epochs (trainer.max_epochs, early stopping on), so SGD steps grow with the data;
+- steps: a fixed number of SGD steps, the default's at all drives (--steps), so only the data grows;
+- wide: width 0.5 (twice the channels) for the wall time the `epochs` run of the same drives and seed
+  took here (trainer.max_time): what more capacity buys at a fixed budget on this machine.
+
+Margin: the network's pooled IoU (its seeds' counts pooled) minus the prior's, the prior being the
+mean label of that subset's training frames, with a 95 % paired interval from the hierarchical
+bootstrap of the test worlds, their 20 m blocks and the seeds (evaluate.bootstrap's resampling).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SETTINGS = ("epochs", "steps", "wide")
+
+
+def read_split(split_dir: Path) -> dict[str, list]:
+    from offroad_path.data.manifest import read_manifest
+
+    return {name: read_manifest(split_dir / f"{name}.csv") for name in ("train", "val", "test")}
+
+
+def subset_split(split: dict[str, list], drives: list[str], folder: Path) -> Path:
+    """A split folder: the training frames of `drives`, the run's validation frames of them, the main test set."""
+    from offroad_path.data.manifest import write_manifest
+
+    folder.mkdir(parents=True, exist_ok=True)
+    write_manifest(folder / "train.csv", [s for s in split["train"] if s.sequence in drives])
+    write_manifest(folder / "val.csv", [s for s in split["val"] if s.sequence in drives])
+    write_manifest(folder / "test.csv", split["test"])
+    return folder
+
+
+def train_once(split_dir: Path, out: Path, model: str, seed: int, overrides: list[str]) -> tuple[Path, float, int]:
+    """The train stage on `split_dir`: (its predictions manifest, wall seconds, SGD steps); an earlier
+    run's in the same --work folder is kept (rescoring)."""
+    from offroad_path.config import load_config
+    from offroad_path.train import train
+    from offroad_path.utils.threads import set_threads
+
+    done = out / "learning_curve.json"
+    if not done.is_file():
+        cfg = load_config(
+            f"model={model}", "pretraining=none", f"seed={seed}", f"data.split_dir={split_dir}", f"train.out_dir={out}",
+            "train.sample_images=0", "resume=false", "mlflow.enabled=false", *overrides,
+        )  # fmt: skip
+        set_threads(cfg.threads)
+        start = time.perf_counter()
+        metrics = train(cfg)
+        done.write_text(json.dumps({"seconds": time.perf_counter() - start, "steps": int(metrics.get("global_step", -1))}))
+    found = json.loads(done.read_text())
+    return out / "predictions" / "manifest.csv", float(found["seconds"]), int(found["steps"])
+
+
+def test_counts(manifest: Path, labels: np.ndarray) -> np.ndarray:
+    """(N, 4) per-image [tp, fp, tn, fn] of a run's test maps at the default threshold."""
+    from offroad_path.data.loading import load_maps
+    from offroad_path.data.manifest import read_predictions_manifest
+    from offroad_path.evaluation.metrics import counts
+
+    rows = read_predictions_manifest(manifest, "train")
+    return counts(load_maps([p for _, p in rows]), labels, 0.5)
+
+
+def curve(args: argparse.Namespace) -> dict:
+    from offroad_path.config import load_config
+    from offroad_path.data.loading import load_labels
+    from offroad_path.evaluation.bootstrap import Resampling
+    from offroad_path.evaluation.metrics import counts, mean_path, pooled
+    from offroad_path.evaluation.report import test_sets
+    from offroad_path.evaluation.scores import iou
+    from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
+    from offroad_path.sequence.meta import MAIN
+
+    cfg = load_config()
+    split = read_split(args.data / "split")
+    split["test"] = [s for s, kept in zip(split["test"], test_sets(split["test"]) == MAIN, strict=True) if kept]
+    labels = load_labels(split["test"])
+    blocks = sample_blocks(split["test"], args.data / "labels", cfg.split.block_m)
+    b = cfg.evaluate.bootstrap
+    bootstrap = HierarchicalBootstrap(blocks, Resampling(args.resamples or b.resamples, b.seed, b.level))
+    drives = sorted({s.sequence for s in split["train"]})
+    steps = args.steps or cfg.trainer.max_epochs * (len(split["train"]) // cfg.data.batch_size)
+    rows = []
+    for k in sorted(set(args.drives)):
+        chosen = drives[:k]
+        folder = subset_split(split, chosen, args.work / f"split_{k}")
+        train_labels = load_labels([s for s in split["train"] if s.sequence in chosen])
+        prior = counts(np.broadcast_to(mean_path(train_labels) > 0.5, labels.shape).astype(np.float32), labels, 0.5)
+        frames = sum(1 for s in split["train"] if s.sequence in chosen and not s.mirrored)
+        for model in args.models:
+            for setting in args.settings:
+                per_seed, seconds, trained_steps = [], [], []
+                for seed in args.seeds:
+                    if setting == "epochs":
+                        overrides = []
+                    elif setting == "steps":
+                        overrides = [f"train.max_steps={steps}", "trainer.max_epochs=100000", "callbacks.early_stopping.patience=100000"]
+                    else:
+                        budget = json.loads((args.work / f"epochs_{model}_{k}_{seed}" / "learning_curve.json").read_text())["seconds"]
+                        overrides = ["model.width=0.5", f"+trainer.max_time={{seconds: {budget:.0f}}}"]
+                    manifest, s, n = train_once(folder, args.work / f"{setting}_{model}_{k}_{seed}", model, seed, overrides)
+                    per_seed.append(test_counts(manifest, labels))
+                    seconds.append(s)
+                    trained_steps.append(n)
+                network = np.stack(per_seed)
+                margin = bootstrap.paired(network, prior, iou)
+                rows.append(
+                    {
+                        "setting": setting, "model": model, "drives": k, "frames": frames, "seeds": list(args.seeds),
+                        "steps": trained_steps, "seconds": [round(x, 1) for x in seconds],
+                        "iou": round(pooled(network.reshape(-1, 4)).iou, 4), "prior_iou": round(pooled(prior).iou, 4),
+                        "margin": round(margin.estimate, 4), "low": round(margin.low, 4), "high": round(margin.high, 4),
+                    }
+                )  # fmt: skip
+                print(table(rows[-1:]), flush=True)
+    worlds = len({s.sequence for s in split["test"]})
+    return {"test_worlds": worlds, "test_images": len(split["test"]), "default_steps": steps, "rows": rows}
+
+
+def table(rows: list[dict]) -> str:
+    lines = [
+        "| setting | network | drives | training frames | SGD steps (per seed) | seconds (per seed) | IoU | mean-path prior "
+        "| margin [95 % interval] |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        shown = f"{r['margin']:+.3f} [{r['low']:+.3f}, {r['high']:+.3f}]"
+        lines.append(
+            f"| {r['setting']} | {r['model']} | {r['drives']} | {r['frames']} | {', '.join(map(str, r['steps']))} | "
+            f"{', '.join(f'{s:.0f}' for s in r['seconds'])} | {r['iou']:.3f} | {r['prior_iou']:.3f} | {shown} |"
+        )
+    return "\n".join(lines)
+
+
+def figure(result: dict, path: Path) -> None:
+    """Margin over the prior against training frames (log scale), one line per setting and network."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.8), dpi=120)
+    lines: dict[tuple[str, str], list[dict]] = {}
+    for r in result["rows"]:
+        lines.setdefault((r["setting"], r["model"]), []).append(r)
+    for (setting, model), rows in lines.items():
+        rows.sort(key=lambda r: r["frames"])
+        x = np.array([r["frames"] for r in rows], float)
+        y = np.array([r["margin"] for r in rows])
+        err = np.array([[r["margin"] - r["low"] for r in rows], [r["high"] - r["margin"] for r in rows]])
+        ax.errorbar(x, y, yerr=err, fmt="o-" if setting == "epochs" else "s--" if setting == "steps" else "^:", capsize=3,
+                    label=f"{model}, {setting}")  # fmt: skip
+    ax.set_xscale("log")
+    ax.axhline(0.0, color="grey", lw=0.8)
+    ax.set_xlabel("training frames (before mirroring)")
+    ax.set_ylabel("IoU minus mean-path prior")
+    ax.set_title(f"main test set: {result['test_worlds']} worlds, {result['test_images']} images; 95 % intervals", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=ROOT / "data", help="a pipeline run's data folder (labels/, split/)")
+    parser.add_argument("--models", nargs="+", default=["unet", "fcn"])
+    parser.add_argument("--drives", nargs="+", type=int, default=[2, 4, 8, 16])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--settings", nargs="+", choices=SETTINGS, default=list(SETTINGS))
+    parser.add_argument("--steps", type=int, default=None, help="the steps setting's SGD steps (default: the default's at all drives)")
+    parser.add_argument("--resamples", type=int, default=None, help="bootstrap resamples (default: evaluate.bootstrap's)")
+    parser.add_argument("--work", type=Path, default=Path("/tmp/learning_curve"), help="runs are kept here: a rerun rescores")
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--figure", type=Path, default=None, help="e.g. docs/images/learning_curve.png")
+    args = parser.parse_args()
+    if not (args.data / "split" / "train.csv").is_file():
+        parser.exit(2, f"{args.data / 'split' / 'train.csv'}: not found; run `dvc repro` (or --data a run's data folder)\n")
+    if "wide" in args.settings and "epochs" not in args.settings:
+        parser.exit(2, "--settings: wide takes its wall time from the epochs runs; list epochs too\n")
+    args.settings = sorted(args.settings, key=SETTINGS.index)  # epochs before wide
+    result = curve(args)
+    print(table(result["rows"]))
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+    if args.figure:
+        figure(result, args.figure)
+
+
+if __name__ == "__main__":
+    main()
