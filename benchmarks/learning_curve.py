@@ -13,7 +13,10 @@ augmentation and mirrored copies), scored on the main test set (no stress world)
 - epochs: the default's epochs (trainer.max_epochs, early stopping on), so SGD steps grow with the data;
 - steps: a fixed number of SGD steps, the default's at all drives (--steps), so only the data grows;
 - wide: width 0.5 (twice the channels) for the wall time the `epochs` run of the same drives and seed
-  took here (trainer.max_time): what more capacity buys at a fixed budget on this machine.
+  took here (trainer.max_time): what more capacity buys at a fixed budget on this machine; at the
+  drives of --wide-at only (default: all of them).
+
+At all drives `steps` is the `epochs` run (the same steps, early stopping never reached): it is not run twice.
 
 Margin: the network's pooled IoU (its seeds' counts pooled) minus the prior's, the prior being the
 mean label of that subset's training frames, with a 95 % paired interval from the hierarchical
@@ -109,16 +112,20 @@ def curve(args: argparse.Namespace) -> dict:
         frames = sum(1 for s in split["train"] if s.sequence in chosen and not s.mirrored)
         for model in args.models:
             for setting in args.settings:
+                if setting == "wide" and k not in (args.wide_at or [len(drives)]):
+                    continue
                 per_seed, seconds, trained_steps = [], [], []
                 for seed in args.seeds:
-                    if setting == "epochs":
+                    same = setting == "steps" and k == len(drives)  # the default's steps at all drives: the epochs run
+                    if setting == "epochs" or same:
                         overrides = []
                     elif setting == "steps":
                         overrides = [f"train.max_steps={steps}", "trainer.max_epochs=100000", "callbacks.early_stopping.patience=100000"]
                     else:
                         budget = json.loads((args.work / f"epochs_{model}_{k}_{seed}" / "learning_curve.json").read_text())["seconds"]
                         overrides = ["model.width=0.5", f"+trainer.max_time={{seconds: {budget:.0f}}}"]
-                    manifest, s, n = train_once(folder, args.work / f"{setting}_{model}_{k}_{seed}", model, seed, overrides)
+                    run = args.work / f"{'epochs' if same else setting}_{model}_{k}_{seed}"
+                    manifest, s, n = train_once(folder, run, model, seed, overrides)
                     per_seed.append(test_counts(manifest, labels))
                     seconds.append(s)
                     trained_steps.append(n)
@@ -188,6 +195,7 @@ def main() -> None:
     parser.add_argument("--drives", nargs="+", type=int, default=[2, 4, 8, 16])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
     parser.add_argument("--settings", nargs="+", choices=SETTINGS, default=list(SETTINGS))
+    parser.add_argument("--wide-at", nargs="+", type=int, default=None, help="drives of the wide setting (default: all drives)")
     parser.add_argument("--steps", type=int, default=None, help="the steps setting's SGD steps (default: the default's at all drives)")
     parser.add_argument("--resamples", type=int, default=None, help="bootstrap resamples (default: evaluate.bootstrap's)")
     parser.add_argument("--work", type=Path, default=Path("/tmp/learning_curve"), help="runs are kept here: a rerun rescores")

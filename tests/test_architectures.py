@@ -90,9 +90,10 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
     stages = set(listed.stdout.split())
     new = {"pretrain@tiny", "train_scratch@tiny-0", "train_pretrained@tiny-0", "postprocess@tiny-none-0", "postprocess@tiny-segmentation-0"}
     assert new <= stages, listed.stdout + listed.stderr
-    seeds = OmegaConf.load(repo / "conf" / "evaluate" / "default.yaml").seeds
-    pilotnets = ("train_steering", "train_steering_slip", "train_steering_curvature")
-    assert {f"{stage}@{s}" for stage in pilotnets for s in seeds} <= stages  # the three PilotNets per seed
-    # synthesize, label, split, evaluate, drive; three PilotNets per seed; per network a pretraining and, per seed,
-    # two trainings and two post-processings
-    assert len(seeds) == 3 and len(stages) == 5 + 3 * len(seeds) + 4 * (1 + 4 * len(seeds))
+    grid = OmegaConf.load(repo / "conf" / "evaluate" / "default.yaml")
+    seeds, drive_seeds = grid.seeds, grid.drive_seeds
+    assert {f"train_steering@{s}" for s in seeds} <= stages  # PilotNet per seed
+    assert {f"{stage}@{s}" for stage in ("train_steering_slip", "train_steering_curvature") for s in drive_seeds} <= stages  # the drive's
+    # synthesize, label, split, evaluate, drive; PilotNet per seed, the drive's two PilotNets per drive seed; per network a
+    # pretraining and, per seed, two trainings and two post-processings
+    assert len(seeds) == 3 and len(stages) == 5 + len(seeds) + 2 * len(drive_seeds) + 4 * (1 + 4 * len(seeds))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from offroad_path.world.appearance import axis_values
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
 from offroad_path.world.held_out import MIN_FRAMES, choose_held_out_worlds, held_out_seed, stress_seed, survey
@@ -57,8 +58,9 @@ def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case
 
 def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog):
     c = compose_config("synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.stress_sets=[outside_look]").synthesize.test_worlds
-    weights = "world.appearance.weights"
-    every = compose_config(f"{weights}.track.grass_track=1.0", f"{weights}.track.none=1.0", f"{weights}.light.hazy=1.0").world
+    every = compose_config(
+        *(f"world.appearance.weights.{axis}.{value}=1.0" for axis in ("track", "light") for value in axis_values()[axis])
+    ).world
     chosen = choose_held_out_worlds(every, c, master_seed=0, workers=1)
     assert {w.test_set for w in chosen} == {"main"} and "stress set outside_look" in caplog.text
 

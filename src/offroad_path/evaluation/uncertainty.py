@@ -115,7 +115,7 @@ def weakest_of(draws: dict[str, Draws]) -> str:
     above 0 (the lowest), else the one with the largest p-value."""
     if below := [key for key, d in draws.items() if d.estimate <= 0]:
         return min(below, key=lambda key: draws[key].estimate)
-    return max(draws, key=lambda key: draws[key].p_value())
+    return max(draws, key=lambda key: (draws[key].p_value(), -draws[key].estimate))  # ties (the least p resamples show): the smaller
 
 
 class Uncertainty:
