@@ -199,6 +199,7 @@ class PosesConfig:
     # With source=file: a path pattern with {name} (the sequence folder's name), or None for
     # the sequence's own poses (poses.txt, or KITTI's poses/XX.txt).
     file: str | None = MISSING
+    max_speed_mps: float = setting(positive())  # with source=file: a longer step between poses is refused
 
 
 @dataclass

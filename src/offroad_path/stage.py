@@ -30,7 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from offroad_path.config import CONF_DIR, register_configs, validate_config
-from offroad_path.errors import EXIT_BAD_INPUT, clear_errors, missing_extra, one_line
+from offroad_path.errors import EXIT_BAD_INPUT, InputError, clear_errors, missing_extra, one_line
 from offroad_path.utils.atomic import remove_unfinished
 from offroad_path.utils.outputs import Outputs, check_outputs, claimed, release_locks
 from offroad_path.utils.parallel import stop_workers
@@ -125,8 +125,17 @@ def run_stage(stage: Stage, cfg: DictConfig) -> Any:
     rules, set the process's threads (`threads`), run, and turn bad input into one line and exit status 2."""
     with clear_errors():
         validate_config(cfg, getattr(stage, "reads", None))
+        check_root(cfg)
         set_threads(cfg.threads)
         return stage(cfg)
+
+
+def check_root(cfg: DictConfig) -> None:
+    """paths.root names a folder: an empty one (`paths.root=$ROOT` with ROOT unset) would put every output
+    into this checkout's data/ and metrics/, over the committed run's."""
+    root = OmegaConf.select(cfg, "paths.root", throw_on_missing=False)
+    if isinstance(root, str) and not root.strip():
+        raise InputError("paths.root", "is empty: give a folder of yours (paths.root=DIR; the checkout's own run: paths.root=.)")
 
 
 def check_search_extra(argv: list[str]) -> None:

@@ -20,7 +20,7 @@ from offroad_path.labelling.footprint import Occlusion, footprint_depth, footpri
 from offroad_path.labelling.frame_selection import select_segments
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
-from offroad_path.sequence.poses import poses_to_text, read_poses
+from offroad_path.sequence.poses import max_steps, poses_to_text, read_poses
 from offroad_path.sequence.reader import Sequence
 from offroad_path.utils.media import write_image
 
@@ -59,7 +59,12 @@ def check_inputs(seq: Sequence, cfg) -> None:
     if cfg.poses.source == "vo":
         seq.require_stereo("the stereo odometry (label.poses.source=vo; give poses.txt and label.poses.source=file)")
     if cfg.poses.source == "file":
-        read_poses(pose_file(seq, cfg), expected_rows=len(seq))
+        file_poses(seq, cfg)
+
+
+def file_poses(seq: Sequence, cfg) -> np.ndarray:
+    """The sequence's poses from its file (label.poses), checked: rotations, and steps a vehicle can make."""
+    return read_poses(pose_file(seq, cfg), expected_rows=len(seq), max_steps_m=max_steps(seq.times, len(seq), cfg.poses.max_speed_mps))
 
 
 def poses_for(seq: Sequence, cfg) -> tuple[np.ndarray, OdometryRun | None]:
@@ -67,7 +72,7 @@ def poses_for(seq: Sequence, cfg) -> tuple[np.ndarray, OdometryRun | None]:
         run = run_odometry(seq, OdometryConfig(**cfg.odometry))
         return run.poses, run
     if cfg.poses.source == "file":
-        return read_poses(pose_file(seq, cfg), expected_rows=len(seq)), None
+        return file_poses(seq, cfg), None
     raise ValueError(f"unknown label.poses.source {cfg.poses.source!r}; valid: {', '.join(POSE_SOURCES)}")
 
 

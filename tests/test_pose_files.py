@@ -1,0 +1,100 @@
+"""Pose files that cannot be a vehicle's drive are refused in one line naming the file and row before any
+label is written: a mirrored rotation (det R = -1), a jump no vehicle makes at the recording's frame
+rate, poses scaled past any number; and an empty paths.root never writes into the checkout."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from offroad_path.errors import InputError
+from offroad_path.sequence.poses import max_steps, poses_to_text, read_poses
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def drive_poses(n: int = 20, step_m: float = 1.0) -> np.ndarray:
+    """A straight drive along z, one step per frame, gently yawing."""
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    for k in range(n):
+        yaw = 0.01 * k
+        poses[k, :3, :3] = [[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]]
+        poses[k, 2, 3] = step_m * k
+    return poses
+
+
+def written(tmp_path: Path, poses: np.ndarray) -> Path:
+    path = tmp_path / "poses.txt"
+    path.write_text(poses_to_text(poses))
+    return path
+
+
+def test_a_mirrored_rotation_is_refused_naming_its_row(tmp_path):
+    poses = drive_poses()
+    mirrored = poses.copy()
+    mirrored[3:, :3, 0] *= -1  # the x column negated from row 4 on: R^T R = I still, det R = -1
+    assert np.allclose(np.einsum("nji,njk->nik", mirrored[:, :3, :3], mirrored[:, :3, :3]), np.eye(3))
+    with pytest.raises(InputError, match=r"poses.txt: row 4 is a reflection, not a rotation \(det R = -1: a column negated\?\)"):
+        read_poses(written(tmp_path, mirrored))
+    assert len(read_poses(written(tmp_path, poses))) == 20
+
+
+def test_a_step_no_vehicle_makes_is_refused_at_the_recordings_frame_rate(tmp_path):
+    poses = drive_poses()
+    poses[7:, 0, 3] += 1000.0  # a jump of 1000 m at frame 8
+    times = np.arange(20) * 0.1  # 10 fps: 6 m per frame at 60 m/s
+    limits = max_steps(times, 20, 60.0)
+    assert limits == pytest.approx(np.full(19, 6.0))
+    with pytest.raises(InputError, match=r"row 8 is 1e\+03 m from row 7, more than 6 m at label.poses.max_speed_mps"):
+        read_poses(written(tmp_path, poses), max_steps_m=limits)
+    assert len(read_poses(written(tmp_path, drive_poses(step_m=5.0)), max_steps_m=limits)) == 20  # 50 m/s: a fast car
+    assert max_steps(None, 3, 60.0) == pytest.approx([60.0, 60.0])  # no times.txt: 1 s per frame
+
+
+def test_poses_scaled_past_any_number_are_refused(tmp_path):
+    poses = drive_poses()
+    poses[:, :3, :] *= 1e300  # finite numbers, but no rotation: R^T R overflows
+    with pytest.raises(InputError, match=r"row 1 is not a rotation \(R\^T R differs from I by inf\)"):
+        read_poses(written(tmp_path, poses))
+
+
+@pytest.mark.slow(seconds=12)
+def test_the_label_stage_refuses_a_mirrored_pose_file_before_any_label(drive, tmp_path):
+    copy = tmp_path / "mono" / "drive"
+    shutil.copytree(drive / "drive", copy, ignore=shutil.ignore_patterns("image_r", "depth", "semantic"))
+    poses = read_poses(copy / "poses.txt")
+    poses[:, :3, 0] *= -1
+    (copy / "poses.txt").write_text(poses_to_text(poses))
+    out = tmp_path / "labels"
+    run = subprocess.run(
+        [sys.executable, "-m", "offroad_path.label", f"label.in_dir={copy.parent}", f"label.out_dir={out}",
+         f"label.metrics_path={tmp_path / 'label.json'}", "label.poses.source=file", "label.occlusion.enabled=false",
+         "mlflow.enabled=false"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert run.returncode == 2, run.stderr
+    assert (
+        run.stderr.strip().splitlines()[-1]
+        == f"error: {copy / 'poses.txt'}: row 1 is a reflection, not a rotation (det R = -1: a column negated?)"
+    )
+    assert not out.exists() and not (tmp_path / "label.json").exists()
+
+
+@pytest.mark.slow(seconds=8)
+def test_the_readmes_own_data_recipe_with_root_unset_writes_nothing(tmp_path):
+    """`OWN="paths=own paths.root=$ROOT"` with ROOT unset is `paths.root=`: one line, exit 2, nothing written
+    where it runs (the checkout's data/ and metrics/ are relative to it)."""
+    env = {k: v for k, v in os.environ.items() if k != "ROOT"}
+    recipe = f'OWN="paths=own paths.root=$ROOT"; {sys.executable} -m offroad_path.label $OWN label.footprint.width_m=1.8'
+    run = subprocess.run(["bash", "-c", recipe], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1] == (
+        "error: paths.root: is empty: give a folder of yours (paths.root=DIR; the checkout's own run: paths.root=.)"
+    )
+    assert list(tmp_path.iterdir()) == []
