@@ -1,5 +1,6 @@
-"""The README's results are generated from metrics/: the committed README agrees with the committed
-metrics, and a README with one number changed is caught."""
+"""The README's results summary and docs/results.md are generated from metrics/: the committed pages agree
+with the committed metrics, a page with one number changed is caught, and the README is for users: no
+dates and no issue numbers."""
 
 from __future__ import annotations
 
@@ -13,8 +14,23 @@ from offroad_path.evaluation.readme import BEGIN, END, generated, main, with_res
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def pages(readme: Path = ROOT / "README.md", results: Path = ROOT / "docs" / "results.md") -> list[str]:
+    return ["--readme", str(readme), "--results", str(results), "--metrics", str(ROOT / "metrics")]
+
+
 def test_the_readme_results_are_the_committed_metrics():
-    assert main(["--check", "--readme", str(ROOT / "README.md"), "--metrics", str(ROOT / "metrics")]) == 0
+    assert main(["--check", *pages()]) == 0
+    summary, full = generated(ROOT / "metrics"), generated(ROOT / "metrics", full=True)
+    assert summary in (ROOT / "README.md").read_text() and full in (ROOT / "docs" / "results.md").read_text()
+    assert "Primary questions" in summary and "Exploratory comparisons" not in summary and "Exploratory comparisons" in full
+
+
+def test_the_readme_holds_no_date_and_no_issue_number():
+    readme = (ROOT / "README.md").read_text()
+    assert not re.search(r"\b20\d\d-\d\d-\d\d\b", readme), "a date in the README: history goes to CHANGELOG.md"
+    assert not re.search(r"(?i)\bissue \d+|#\d{2,}\b", readme), "an issue number in the README"
+    assert not re.search(r"(?i)\b(xeon|epyc|avx-?512|avx2)\b", readme), "a CPU in the README: provenance goes to docs/results.md"
+    assert len(readme.splitlines()) <= 250
 
 
 def test_a_readme_with_one_number_changed_fails_the_check(tmp_path, capsys):
@@ -26,9 +42,10 @@ def test_a_readme_with_one_number_changed_fails_the_check(tmp_path, capsys):
     edited = readme.replace(block, block.replace(number.group(0), f"| {changed} [", 1))
     assert edited != readme
     (tmp_path / "README.md").write_text(edited)
-    assert main(["--check", "--readme", str(tmp_path / "README.md"), "--metrics", str(ROOT / "metrics")]) == 1
+    (tmp_path / "results.md").write_text((ROOT / "docs" / "results.md").read_text())
+    assert main(["--check", *pages(tmp_path / "README.md", tmp_path / "results.md")]) == 1
     assert "README.md: its results disagree with" in capsys.readouterr().err
-    assert main(["--readme", str(tmp_path / "README.md"), "--metrics", str(ROOT / "metrics")]) == 0  # regenerated
+    assert main(pages(tmp_path / "README.md", tmp_path / "results.md")) == 0  # regenerated
     assert (tmp_path / "README.md").read_text() == readme
 
 

@@ -1,8 +1,9 @@
-"""The README's results section, generated from the committed run's metrics (metrics/evaluation.json,
-label.json, steering/seed<k>.json, drive.json), so that no number in it is copied by hand or quotes an older run.
+"""The README's results summary and docs/results.md, generated from the committed run's metrics
+(metrics/evaluation.json, label.json, steering/seed<k>.json, drive.json), so that no number in them is
+copied by hand or quotes an older run.
 
-    python -m offroad_path.evaluation.readme            # rewrite the block between the markers in README.md
-    python -m offroad_path.evaluation.readme --check    # exit 1 when README.md disagrees with metrics/
+    python -m offroad_path.evaluation.readme            # rewrite the blocks between the markers
+    python -m offroad_path.evaluation.readme --check    # exit 1 when either disagrees with metrics/
 
 Every comparison is stated with its paired hierarchical-bootstrap interval from the report, and as
 "no difference measured" when the interval holds 0 (evaluation.bootstrap.Interval.difference_text).
@@ -54,11 +55,13 @@ def _f(x: float | None) -> str:
 
 
 def results_markdown(  # noqa: PLR0913
-    evaluation: dict, label: dict, steering: list[dict], resamples: int, *, drive: dict | None = None, conclusions=None
+    evaluation: dict, label: dict, steering: list[dict], resamples: int, *, drive: dict | None = None, conclusions=None, full: bool = True
 ) -> str:
-    """The results section's body (between the markers) from the metrics files (steering: PilotNet's
-    metrics per training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
-    evaluate.bootstrap.resamples of the run that wrote them; conclusions: its evaluate.conclusions (the primaries)."""
+    """The results' body (between the markers) from the metrics files (steering: PilotNet's metrics per
+    training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
+    evaluate.bootstrap.resamples of the run that wrote them; conclusions: its evaluate.conclusions (the
+    primaries). full: every table (docs/results.md); else the README's summary: Table 5.1, the primaries,
+    the baselines and the stress sets."""
     u = evaluation.get("uncertainty", {})
     runs = [key for key, value in evaluation.items() if isinstance(value, dict) and "raw" in value]
     blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
@@ -101,17 +104,11 @@ def results_markdown(  # noqa: PLR0913
                 f"| {network_name(model)} | {pretraining} | {pp} | {r['accuracy']:.3f} | {r['recall']:.3f} | {r['precision']:.3f} | "
                 f"{found.text() if found else _f(r['iou'])} | {spread}{paper[0]} | {paper[1]} |"
             )
-    out += [
-        "",
-        *_primaries(conclusions, evaluation, drive or {}),
-        *_comparisons(u),
-        *_baselines(evaluation),
-        *_steering(evaluation, steering),
-        *_conditions(evaluation, runs),
-        stress.markdown(evaluation.get("stress_sets", {}), heading="Stress sets (exploratory). "),
-        *_temporal(evaluation),
-        *_driving(drive or {}, conclusions),
-    ]
+    out += ["", *_primaries(conclusions, evaluation, drive or {}), *_baselines(evaluation)]
+    out.append(stress.markdown(evaluation.get("stress_sets", {}), heading="Stress sets (exploratory). "))
+    if full:
+        out += [*_comparisons(u), *_steering(evaluation, steering), *_conditions(evaluation, runs), *_temporal(evaluation)]
+        out += _driving(drive or {}, conclusions)
     return "\n".join(out).rstrip("\n") + "\n"
 
 
@@ -366,7 +363,8 @@ def with_results(readme: str, block: str, path: Path = Path("README.md")) -> str
     return f"{head}{BEGIN}\n\n{block}\n{END}{rest.split(END, 1)[1]}"
 
 
-def generated(metrics_dir: Path) -> str:
+def generated(metrics_dir: Path, full: bool = False) -> str:
+    """The README's block (full: docs/results.md's) from the metrics in metrics_dir."""
     read = {name: json.loads((metrics_dir / f"{name}.json").read_text()) for name in ("evaluation", "label")}
     drive = json.loads((metrics_dir / "drive.json").read_text()) if (metrics_dir / "drive.json").is_file() else None
     from offroad_path.config import load_config
@@ -374,29 +372,33 @@ def generated(metrics_dir: Path) -> str:
     e = load_config().evaluate  # the committed run's: dvc.lock tracks conf/evaluate
     files = {seed: metrics_dir / "steering" / f"seed{seed}.json" for seed in e.seeds}
     steering = [{**json.loads(path.read_text()), "seed": seed} for seed, path in files.items() if path.is_file()]
-    return results_markdown(read["evaluation"], read["label"], steering, e.bootstrap.resamples, drive=drive, conclusions=e.conclusions)
+    return results_markdown(
+        read["evaluation"], read["label"], steering, e.bootstrap.resamples, drive=drive, conclusions=e.conclusions, full=full
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--readme", type=Path, default=Path("README.md"))
+    parser.add_argument("--results", type=Path, default=Path("docs/results.md"), help="every table, between the same markers")
     parser.add_argument("--metrics", type=Path, default=Path("metrics"))
-    parser.add_argument("--check", action="store_true", help="exit 1 when the README's results differ from the metrics")
+    parser.add_argument(
+        "--check", action="store_true", help="exit 1 when the README's or the results page's tables differ from the metrics"
+    )
     args = parser.parse_args(argv)
-    current = args.readme.read_text()
-    if args.check and (wrong := misstated(current)):
-        print(f"{args.readme}: primaries {', '.join(wrong)} state a direction inside their corrected interval", file=sys.stderr)
-        return 1
-    wanted = with_results(current, generated(args.metrics), args.readme)
-    if args.check:
-        if wanted != current:
-            print(
-                f"{args.readme}: its results disagree with {args.metrics}/ (run python -m offroad_path.evaluation.readme)", file=sys.stderr
-            )
+    status = 0
+    for path, full in ((args.readme, False), (args.results, True)):
+        current = path.read_text()
+        if args.check and (wrong := misstated(current)):
+            print(f"{path}: primaries {', '.join(wrong)} state a direction inside their corrected interval", file=sys.stderr)
             return 1
-        return 0
-    args.readme.write_text(wanted)
-    return 0
+        wanted = with_results(current, generated(args.metrics, full), path)
+        if not args.check:
+            path.write_text(wanted)
+        elif wanted != current:
+            print(f"{path}: its results disagree with {args.metrics}/ (run python -m offroad_path.evaluation.readme)", file=sys.stderr)
+            status = 1
+    return status
 
 
 if __name__ == "__main__":
