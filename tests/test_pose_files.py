@@ -98,3 +98,23 @@ def test_the_readmes_own_data_recipe_with_root_unset_writes_nothing(tmp_path):
         "error: paths.root: is empty: give a folder of yours (paths.root=DIR; the checkout's own run: paths.root=.)"
     )
     assert list(tmp_path.iterdir()) == []
+
+
+def test_bag_poses_are_put_in_stamp_order_and_conflicting_or_broken_ones_refused():
+    from offroad_path.recordings.bags import in_stamp_order, pose_matrix
+
+    where = "field.bag: /tf"
+    poses = np.stack([pose_matrix((0, 0, 0, 1), (0, 0, z), where) for z in (0.0, 1.0, 2.0, 3.0)])
+    times = np.array([0.0, 0.2, 0.1, 0.3])  # recorded as they arrived: 0.2 before 0.1
+    t, p = in_stamp_order(times, poses, where)
+    assert list(t) == [0.0, 0.1, 0.2, 0.3] and list(p[:, 2, 3]) == [0.0, 2.0, 1.0, 3.0]
+    t, p = in_stamp_order(np.array([0.0, 0.1, 0.1]), poses[[0, 1, 1]], where)  # the same pose twice: once
+    assert list(t) == [0.0, 0.1] and len(p) == 2
+    with pytest.raises(InputError, match=r"field.bag: /tf: two different poses at the same stamp 0.100000 s"):
+        in_stamp_order(np.array([0.0, 0.1, 0.1]), poses[:3], where)
+    with pytest.raises(InputError, match=r"field.bag: /tf at 3.5 s: a pose whose orientation quaternion \(0, 0, 0, 0\) has zero norm"):
+        pose_matrix((0, 0, 0, 0), (1, 2, 3), "field.bag: /tf at 3.5 s")
+    with pytest.raises(InputError, match=r"a pose with a non-finite value \(orientation \(0, 0, 0, nan\)"):
+        pose_matrix((0, 0, 0, float("nan")), (1, 2, 3), where)
+    with pytest.raises(InputError, match=r"position \(nan, 2, 3\)"):
+        pose_matrix((0, 0, 0, 1), (float("nan"), 2, 3), where)

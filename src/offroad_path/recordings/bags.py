@@ -150,14 +150,37 @@ class Bag:
                 pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
                 found = [(stamp_s(msg), pose.orientation, pose.position)]
             for stamp, q, p in found:
-                T = np.eye(4)
-                T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-                T[:3, 3] = (p.x, p.y, p.z)
                 times.append(stamp)
-                poses.append(T)
+                poses.append(pose_matrix((q.x, q.y, q.z, q.w), (p.x, p.y, p.z), f"{self.path}: {topic} at {stamp:.6f} s"))
         if not times and connections[0].msgtype == TF_TYPE:
             raise InputError(self.path, f"{topic} has no transform to the child frame {child_frame} (ingest.tf_child_frame)")
-        return np.asarray(times), np.asarray(poses).reshape(-1, 4, 4)
+        return in_stamp_order(np.asarray(times), np.asarray(poses).reshape(-1, 4, 4), f"{self.path}: {topic}")
+
+
+def pose_matrix(quaternion: tuple[float, ...], position: tuple[float, ...], where: str) -> np.ndarray:
+    """The 4 x 4 pose of a quaternion (x, y, z, w) and a position; InputError naming `where` (bag, topic,
+    stamp) for a non-finite value or a quaternion of (nearly) zero norm."""
+    if not np.isfinite([*quaternion, *position]).all():
+        raise InputError(where, f"a pose with a non-finite value (orientation {quaternion}, position {position})")
+    if np.linalg.norm(quaternion) < 1e-6:
+        raise InputError(where, f"a pose whose orientation quaternion {quaternion} has zero norm")
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat(quaternion).as_matrix()
+    T[:3, 3] = position
+    return T
+
+
+def in_stamp_order(times: np.ndarray, poses: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """Poses sorted by their stamps (a bag records messages as they arrived); repeats of a stamp kept once
+    when they agree, an InputError naming the stamp when they do not."""
+    order = np.argsort(times, kind="stable")
+    times, poses = times[order], poses[order]
+    repeat = np.flatnonzero(np.diff(times) == 0)
+    if len(conflict := [i for i in repeat if not np.allclose(poses[i], poses[i + 1], atol=1e-9)]):
+        raise InputError(where, f"two different poses at the same stamp {times[conflict[0]]:.6f} s")
+    keep = np.ones(len(times), bool)
+    keep[repeat + 1] = False
+    return times[keep], poses[keep]
 
 
 def compressed_size(msg: Any, topic: str, source: Path) -> tuple[int, int]:
