@@ -48,3 +48,22 @@ def test_every_pretraining_of_the_grid_has_a_training_stage():
     trained = {cmd.split("pretraining=")[1].split()[0] for cmd in (s["cmd"] for s in STAGES.values()) if "offroad_path.train " in cmd}
     missing = sorted(set(grid["pretrainings"]) - trained)
     assert not missing, f"pretrainings {missing} of conf/evaluate/default.yaml have no train stage in dvc.yaml"
+
+
+@pytest.mark.parametrize("pipeline", ["dvc.yaml", "own/dvc.yaml", "gpu/dvc.yaml"])
+def test_committed_metrics_are_kept_in_place_while_their_stage_reruns(pipeline):
+    """DVC deletes a stage's outputs before running it unless they persist: a committed metrics file (not in
+    DVC's cache) would be lost by a stopped run. Every stage writes its own atomically, so it may persist."""
+    stages = yaml.safe_load((ROOT / pipeline).read_text())["stages"]
+    committed = [
+        (name, path, entry)
+        for name, stage in stages.items()
+        for key in ("outs", "metrics", "plots")
+        for item in stage.get(key, [])
+        if isinstance(item, dict)
+        for path, entry in item.items()
+        if (entry or {}).get("cache") is False
+    ]
+    assert committed and all(entry.get("persist") is True for _, _, entry in committed), [
+        (n, p) for n, p, e in committed if not e.get("persist")
+    ]

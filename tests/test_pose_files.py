@@ -86,7 +86,7 @@ def test_the_label_stage_refuses_a_mirrored_pose_file_before_any_label(drive, tm
     assert not out.exists() and not (tmp_path / "label.json").exists()
 
 
-@pytest.mark.slow(seconds=8)
+@pytest.mark.slow(seconds=14)
 def test_the_readmes_own_data_recipe_with_root_unset_writes_nothing(tmp_path):
     """`OWN="paths=own paths.root=$ROOT"` with ROOT unset is `paths.root=`: one line, exit 2, nothing written
     where it runs (the checkout's data/ and metrics/ are relative to it)."""
@@ -96,6 +96,11 @@ def test_the_readmes_own_data_recipe_with_root_unset_writes_nothing(tmp_path):
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1] == (
         "error: paths.root: is empty: give a folder of yours (paths.root=DIR; the checkout's own run: paths.root=.)"
+    )
+    assert list(tmp_path.iterdir()) == []
+    unset = subprocess.run([sys.executable, "-m", "offroad_path.label", "experiment=own"], cwd=tmp_path, capture_output=True, text=True)
+    assert unset.returncode == 2 and unset.stderr.strip().splitlines()[-1] == (
+        "error: paths.root is required (for label.in_dir): give it on the command line, paths.root=..."
     )
     assert list(tmp_path.iterdir()) == []
 

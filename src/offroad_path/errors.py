@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import re
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from omegaconf.errors import MissingMandatoryValue
+from omegaconf.errors import InterpolationToMissingValueError, MissingMandatoryValue
 
 EXIT_BAD_INPUT = 2
 
@@ -38,6 +39,11 @@ def clear_errors() -> Iterator[None]:
         yield
     except MissingMandatoryValue as e:  # a required setting (`???` in conf/) was not given
         print(f"error: {e.full_key} is required: give it on the command line, {e.full_key}=...", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from e
+    except InterpolationToMissingValueError as e:  # a setting made from a required one (label.in_dir from paths.root)
+        missing = re.search(r"Missing mandatory value: (\S+)", str(e))
+        key = missing.group(1) if missing else e.full_key
+        print(f"error: {key} is required (for {e.full_key}): give it on the command line, {key}=...", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT) from e
     except OSError as e:  # a missing file, a full disk, a folder that may not be written
         print(f"error: {e.filename}: {e.strerror}" if e.filename and e.strerror else f"error: {e}", file=sys.stderr)
