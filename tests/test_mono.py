@@ -171,3 +171,12 @@ def test_the_report_says_which_test_images_were_post_processed_without_the_depth
     assert "| U-Net | none | no | 0.500 | 0.500 | 0.500 | 0.333 |" in table.markdown()  # tp 1, fp 1, fn 1: IoU 1/3
     table.score(SimpleNamespace(runs=["unet-none"], samples=[sample("d.png")] * 3, counts=counts))
     assert "one camera" not in table.markdown()
+
+
+def test_a_mono_label_run_decodes_its_images_and_names_a_broken_one(compose_config, drive, tmp_path):
+    mono_in = mono_copy(drive, tmp_path / "mono_in")
+    image = mono_in / "drive" / "image_l" / "000000.png"
+    image.write_bytes(image.read_bytes()[:2000])  # truncated: the header and a little of the data
+    with pytest.raises(InputError, match=r"image_l/000000.png: cannot be decoded as an image"):
+        label(label_config(compose_config, mono_in, tmp_path, "label.occlusion.enabled=false"))
+    assert not (tmp_path / "labels").exists() and not (tmp_path / "label.json").exists()

@@ -142,6 +142,8 @@ def label_segment(seq: Sequence, report: SegmentReport, polygons: list[np.ndarra
     label pixels, or drop it when the footprint falls outside the image. One camera: no disparity,
     no occlusion (label.py says so)."""
     f0, occlusion_cfg = report.f0, cfg.occlusion
+    if seq.mono:  # decoded, as the stereo odometry decodes every image: a broken one is named now, not at training
+        seq.load_left(f0)
     disparity = None if seq.mono else compute_disparity(sgbm(cfg.disparity), seq.load_left(f0, grey=True), seq.load_right(f0, grey=True))
     occlusion = (
         Occlusion(measured_depth(seq, f0, disparity, occlusion_cfg), occlusion_cfg.margin_m, occlusion_cfg.margin_rel)
