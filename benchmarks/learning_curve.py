@@ -17,6 +17,8 @@ augmentation and mirrored copies), scored on the main test set (no stress world)
   drives of --wide-at only (default: all of them).
 
 At all drives `steps` is the `epochs` run (the same steps, early stopping never reached): it is not run twice.
+At all drives `epochs` is the default itself: `--reuse data/runs` scores the pipeline's own runs
+(<model>-none/seed<k>) there instead of training them again (the same data, config and seeds).
 
 Margin: the network's pooled IoU (its seeds' counts pooled) minus the prior's, the prior being the
 mean label of that subset's training frames, with a 95 % paired interval from the hierarchical
@@ -74,14 +76,15 @@ def train_once(split_dir: Path, out: Path, model: str, seed: int, overrides: lis
     return out / "predictions" / "manifest.csv", float(found["seconds"]), int(found["steps"])
 
 
-def test_counts(manifest: Path, labels: np.ndarray) -> np.ndarray:
-    """(N, 4) per-image [tp, fp, tn, fn] of a run's test maps at the default threshold."""
+def test_counts(manifest: Path, test: list, labels: np.ndarray) -> np.ndarray:
+    """(N, 4) per-image [tp, fp, tn, fn] of a run's maps of the `test` samples (found by sequence, frame and
+    mirroring among the run's, which may hold more) at the default threshold."""
     from offroad_path.data.loading import load_maps
     from offroad_path.data.manifest import read_predictions_manifest
     from offroad_path.evaluation.metrics import counts
 
-    rows = read_predictions_manifest(manifest, "train")
-    return counts(load_maps([p for _, p in rows]), labels, 0.5)
+    maps = {(s.sequence, s.f0, s.mirrored): path for s, path in read_predictions_manifest(manifest, "train")}
+    return counts(load_maps([maps[s.sequence, s.f0, s.mirrored] for s in test]), labels, 0.5)
 
 
 def curve(args: argparse.Namespace) -> dict:
@@ -125,8 +128,13 @@ def curve(args: argparse.Namespace) -> dict:
                         budget = json.loads((args.work / f"epochs_{model}_{k}_{seed}" / "learning_curve.json").read_text())["seconds"]
                         overrides = ["model.width=0.5", f"+trainer.max_time={{seconds: {budget:.0f}}}"]
                     run = args.work / f"{'epochs' if same else setting}_{model}_{k}_{seed}"
-                    manifest, s, n = train_once(folder, run, model, seed, overrides)
-                    per_seed.append(test_counts(manifest, labels))
+                    if args.reuse and setting in ("epochs", "steps") and k == len(drives):
+                        run = args.reuse / f"{model}-none" / f"seed{seed}"  # the pipeline's own run of the default
+                        steps_run = int(json.loads((run / "metrics.json").read_text())["global_step"])
+                        manifest, s, n = run / "predictions" / "manifest.csv", float("nan"), steps_run
+                    else:
+                        manifest, s, n = train_once(folder, run, model, seed, overrides)
+                    per_seed.append(test_counts(manifest, split["test"], labels))
                     seconds.append(s)
                     trained_steps.append(n)
                 network = np.stack(per_seed)
@@ -197,6 +205,7 @@ def main() -> None:
     parser.add_argument("--settings", nargs="+", choices=SETTINGS, default=list(SETTINGS))
     parser.add_argument("--wide-at", nargs="+", type=int, default=None, help="drives of the wide setting (default: all drives)")
     parser.add_argument("--steps", type=int, default=None, help="the steps setting's SGD steps (default: the default's at all drives)")
+    parser.add_argument("--reuse", type=Path, default=None, help="the pipeline's runs folder (data/runs): its runs at all drives")
     parser.add_argument("--resamples", type=int, default=None, help="bootstrap resamples (default: evaluate.bootstrap's)")
     parser.add_argument("--work", type=Path, default=Path("/tmp/learning_curve"), help="runs are kept here: a rerun rescores")
     parser.add_argument("--json", type=Path, default=None)
