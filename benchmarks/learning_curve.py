@@ -92,14 +92,14 @@ def curve(args: argparse.Namespace) -> dict:
     from offroad_path.data.loading import load_labels
     from offroad_path.evaluation.bootstrap import Resampling
     from offroad_path.evaluation.metrics import counts, mean_path, pooled
-    from offroad_path.evaluation.report import test_sets
+    from offroad_path.evaluation.report import sample_test_sets
     from offroad_path.evaluation.scores import iou
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
     from offroad_path.sequence.meta import MAIN
 
     cfg = load_config()
     split = read_split(args.data / "split")
-    split["test"] = [s for s, kept in zip(split["test"], test_sets(split["test"]) == MAIN, strict=True) if kept]
+    split["test"] = [s for s, kept in zip(split["test"], sample_test_sets(split["test"]) == MAIN, strict=True) if kept]
     labels = load_labels(split["test"])
     blocks = sample_blocks(split["test"], args.data / "labels", cfg.split.block_m)
     b = cfg.evaluate.bootstrap

@@ -46,7 +46,7 @@ class TestSet:
     prior: np.ndarray  # (H, W) bool: the mean training label above the threshold
     threshold: float  # path where confidence > threshold (evaluate.threshold)
     colour: np.ndarray | None = None  # (N, H, W) float32: the colour baseline's path probability (evaluation.colour); None: off
-    sets: np.ndarray | None = None  # (N,) each sample's test set (test_sets): main or a stress set's name
+    sets: np.ndarray | None = None  # (N,) each sample's test set (sample_test_sets): main or a stress set's name
 
     @property
     def main(self) -> np.ndarray:
@@ -80,7 +80,7 @@ class TestSet:
                     samples = [s for s, _ in rows]
                     if not len(labels):
                         labels = load_labels(samples)
-                        sets = test_sets(samples)
+                        sets = sample_test_sets(samples)
                         main = sets == meta_keys.MAIN
                     maps = load_maps([p for _, p in rows])
                     per_seed.setdefault((run, pp), []).append(counts(maps, labels, e.threshold))
@@ -152,7 +152,7 @@ class TestSet:
         return None if self.colour is None else counts(self.colour, self.labels, self.threshold)
 
 
-def test_sets(samples: list[Sample]) -> np.ndarray:
+def sample_test_sets(samples: list[Sample]) -> np.ndarray:
     """(N,) each sample's test set: its recording's meta.json "test_set" (main when it has none or no meta.json)."""
     found: dict[Path, str] = {}
     for sample in samples:

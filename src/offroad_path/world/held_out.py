@@ -28,9 +28,10 @@ import numpy as np
 from offroad_path.config import TestWorldsConfig, WorldConfig
 from offroad_path.sequence.meta import MAIN
 from offroad_path.utils.parallel import map_processes
+from offroad_path.world.appearance import AXES, training_values
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
-from offroad_path.world.scene import build_world
+from offroad_path.world.scene import appearance_weights, build_world
 
 log = logging.getLogger(__name__)
 TEST_STREAM = 1  # the spawn key of test-world seeds: SeedSequence([master, i]) pads with zeros, so [master, 1, i] could repeat a drive's
@@ -136,8 +137,5 @@ def _draws_differ(cfg: WorldConfig, stress_set: str) -> bool:
         return False
     if stress_set == "held_out_look":
         return bool(cfg.appearance.held_out)
-    from offroad_path.world.appearance import AXES, training_values
-    from offroad_path.world.scene import appearance_weights
-
     weights = appearance_weights(cfg)
     return any(len(training_values(weights, axis)) < len(training_values(None, axis)) for axis in AXES)
