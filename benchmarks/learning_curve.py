@@ -126,8 +126,8 @@ def curve(args: argparse.Namespace) -> dict:
                         overrides = [f"train.max_steps={steps}", "trainer.max_epochs=100000", "callbacks.early_stopping.patience=100000"]
                     else:
                         budget = json.loads((args.work / f"epochs_{model}_{k}_{seed}" / "learning_curve.json").read_text())["seconds"]
-                        seconds = round(budget)
-                        overrides = ["model.width=0.5", f"trainer.max_time='00:00:{seconds // 60:02d}:{seconds % 60:02d}'"]
+                        whole = round(budget)
+                        overrides = ["model.width=0.5", f"trainer.max_time='00:00:{whole // 60:02d}:{whole % 60:02d}'"]
                     run = args.work / f"{'epochs' if same else setting}_{model}_{k}_{seed}"
                     if args.reuse and setting in ("epochs", "steps") and k == len(drives):
                         run = args.reuse / f"{model}-none" / f"seed{seed}"  # the pipeline's own run of the default
