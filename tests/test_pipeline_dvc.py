@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import pytest
 import yaml
-from helpers import dvc, dvc_at_once, in_repo, run_notebook, tiny_repo
+from helpers import ROOT, dvc, dvc_at_once, in_repo, run_notebook, tiny_repo
 
 from offroad_path.sequence import find_sequences
 
@@ -125,3 +126,19 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     results = run_notebook("02_results.ipynb", repo_copy, monkeypatch)
     assert len(results["results"]) == 2 * 2 * len(GRID) and len(results["curves"]) == 2 * len(GRID)
     assert results["evaluation"].data.tags.get("stage") == "evaluate"
+
+
+@pytest.mark.slow(seconds=60)
+def test_the_gpu_pipeline_runs_its_stages_into_gpu(tmp_path):
+    """gpu/dvc.yaml (experiment=gpu, made from dvc.yaml) on the tiny preset in a copy: its stages up to a
+    training run in the checkout and write under gpu/ only, never into the laptop's data/ or metrics/."""
+    repo = tiny_repo(tmp_path / "repo")
+    shutil.copytree(ROOT / "gpu", repo / "gpu")
+    # the copy's GPU preset is the tiny one (the real one's sizes are for a GPU): what runs here is the pipeline file
+    (repo / "conf" / "experiment" / "gpu.yaml").write_text("# @package _global_\ndefaults:\n  - tiny\n  - _self_\n")
+    dvc(repo, "repro", "gpu/dvc.yaml:train_scratch@unet-0")
+    assert (repo / "gpu" / "data" / "runs" / "unet-none" / "seed0" / "checkpoints" / "best.ckpt").is_file()
+    assert json.loads((repo / "gpu" / "metrics" / "label.json").read_text())["labels"] > 0
+    assert not (repo / "data").exists() and not (repo / "metrics").exists()
+    locked = yaml.safe_load((repo / "gpu" / "dvc.lock").read_text())["stages"]
+    assert set(locked) == {"synthesize", "label", "split", "train_scratch@unet-0"}
