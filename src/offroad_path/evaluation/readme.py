@@ -202,11 +202,20 @@ def _baselines(evaluation: dict) -> list[str]:
         if colour and colour.get("iou") is not None
         else ""
     )
+    everything = evaluation.get("by_condition", {}).get("all", {})
+    margins = [(key.removesuffix(".minus_prior"), value) for key, value in everything.items() if key.endswith(".minus_prior")]
+    margin_text = (
+        " Each network minus the prior on the main test set (raw maps, seeds pooled, paired hierarchical interval): "
+        + "; ".join(f"{method_title(run)} {Interval(*m).difference_text()}" for run, m in margins if run != "colour_classifier")
+        + "."
+        if margins
+        else ""
+    )
     return [
         f"What a model must beat, on the same test set: the mean path prior (the average training label, thresholded, on every "
         f"image) scores accuracy {b['mean_path_prior']['accuracy']:.3f} and IoU {b['mean_path_prior']['iou']:.3f}; each network's "
         f"outputs against every *other* test frame's ground truth (the paper's non-corresponding baseline; paper: IoU 0.41)"
-        f"{spread}.{colour_text}\n"
+        f"{spread}.{colour_text}{margin_text}\n"
     ]
 
 
