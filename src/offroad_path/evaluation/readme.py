@@ -68,9 +68,11 @@ def results_markdown(  # noqa: PLR0913
     worlds = u.get("test_set", {}).get("worlds", "n/a")
     everything = evaluation.get("by_condition", {}).get("all", {})
     out = [
-        "The committed run: `dvc repro` of the embedded default on a 2-core CPU (`dvc.lock`, `metrics/`; the full report, "
-        "with every table below and more, is `data/evaluation/results.md`). This section is generated from `metrics/` "
-        "(`python -m offroad_path.evaluation.readme`; a test fails when it disagrees with them).\n",
+        "The committed run: `dvc repro` of the embedded default on a 2-core CPU (`dvc.lock`, `metrics/`; "
+        + ("the evaluate stage's own report is `data/evaluation/results.md`" if full else "every other table: `docs/results.md`")
+        + "). Generated from `metrics/` (`python -m offroad_path.evaluation.readme`; a test fails when it disagrees with them). "
+        "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
+        "the stress sets, each scored on its own.\n",
         f"Labels: {label['labels']} from {label['sequences']} rendered sequences, {label['segments_dropped']} segments dropped; VO drift "
         f"over 20 m segments {label['translation_drift_pct']:.2f} % (worst sequence {label['translation_drift_pct_worst']:.2f} %), "
         f"{label['rotation_drift_deg_per_m']:.4f} deg/m"
