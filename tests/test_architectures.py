@@ -96,4 +96,4 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
     assert {f"{stage}@{s}" for stage in ("train_steering_slip", "train_steering_curvature") for s in drive_seeds} <= stages  # the drive's
     # synthesize, label, split, evaluate, drive; PilotNet per seed, the drive's two PilotNets per drive seed; per network a
     # pretraining and, per seed, two trainings and two post-processings
-    assert len(seeds) == 3 and len(stages) == 5 + len(seeds) + 2 * len(drive_seeds) + 4 * (1 + 4 * len(seeds))
+    assert len(seeds) >= 2 and len(stages) == 5 + len(seeds) + 2 * len(drive_seeds) + 4 * (1 + 4 * len(seeds))
