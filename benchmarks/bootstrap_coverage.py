@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
-from offroad_path.evaluation.bootstrap import Resampling, interval, score_draws
-from offroad_path.evaluation.scores import iou
+from offroad_path.statistics.bootstrap import Resampling, interval, score_draws
+from offroad_path.statistics.scores import iou
 
 SETTINGS = [(0.06, 0.05, 0.02), (0.04, 0.05, 0.01), (0.08, 0.03, 0.03), (0.0, 0.08, 0.0)]  # world, block, seed sd
 

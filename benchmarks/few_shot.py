@@ -130,10 +130,10 @@ def predict(checkpoints: list[Path], images: list[np.ndarray]) -> np.ndarray:
 
 def curve(args) -> dict:
     from offroad_path.config import load_config
-    from offroad_path.evaluation.bootstrap import Resampling, block_sums, paired_interval
+    from offroad_path.statistics.bootstrap import Resampling, block_sums, paired_interval
     from offroad_path.evaluation.metrics import counts
     from offroad_path.evaluation.real import real_row
-    from offroad_path.evaluation.scores import iou
+    from offroad_path.statistics.scores import iou
 
     cfg = load_config()
     resampling = Resampling(cfg.evaluate.bootstrap.resamples, cfg.evaluate.bootstrap.seed)
@@ -215,8 +215,8 @@ def train_runs(args: argparse.Namespace, pool: list, test_samples: list, work: P
 def paired_rows(sums: dict, resampling, pool: int) -> list[dict]:
     """IoU differences on the same resampled blocks and seeds: every fine-tuned network minus the world
     network it started from (0 frames), and real labels minus shuffled ones (every frame)."""
-    from offroad_path.evaluation.bootstrap import paired_interval
-    from offroad_path.evaluation.scores import iou
+    from offroad_path.statistics.bootstrap import paired_interval
+    from offroad_path.statistics.scores import iou
 
     pairs = [((init, size), ("world", 0)) for init, size in sums if size and init != "shuffled"]
     pairs += [(("world", pool), ("shuffled", pool))] if ("shuffled", pool) in sums else []

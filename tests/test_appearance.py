@@ -143,10 +143,10 @@ def test_stress_sets_section_by_hand(tmp_path):
     """Two main worlds and two stress worlds (held-out looks), one frame each, one run with two seeds: the
     section scores only the stress frames, each against the prior, counted by hand."""
     from offroad_path.data.manifest import Sample
-    from offroad_path.evaluation.bootstrap import Resampling
     from offroad_path.evaluation.report import TestSet
     from offroad_path.evaluation.stress import StressSets
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
+    from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.world.conditions import COLUMNS
 
     samples = []
@@ -172,3 +172,11 @@ def test_stress_sets_section_by_hand(tmp_path):
     assert net["iou"] == pytest.approx(6 / 20) and net["minus_prior"] == pytest.approx(6 / 20 - 1 / 3, abs=1e-6)
     assert net["low"] <= net["minus_prior"] <= net["high"]
     assert "| a look no training drive shows (world.appearance.held_out) | 2 | 2 | 0.333 |" in section.markdown()
+
+
+def test_the_renderers_tables_give_every_look_name_its_colours_in_drawing_order():
+    """offroad_path.looks names the values the settings may use; the renderer's tables hold exactly those."""
+    from offroad_path.looks import AXIS_VALUES
+    from offroad_path.world.appearance import LIGHTS, SEASONS, TRACKS, VEGETATION
+
+    assert (tuple(TRACKS), tuple(SEASONS), tuple(LIGHTS), tuple(VEGETATION)) == tuple(AXIS_VALUES.values())

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.evaluation.bootstrap import (
+from offroad_path.statistics.bootstrap import (
     Draws,
     Interval,
     Resampling,
@@ -17,7 +17,7 @@ from offroad_path.evaluation.bootstrap import (
     paired_interval,
     score_draws,
 )
-from offroad_path.evaluation.scores import iou
+from offroad_path.statistics.scores import iou
 
 A = [60, 20, 900, 20]  # tp fp tn fn of one block: IoU 60 / 100 = 0.6
 B = [90, 5, 900, 5]  # IoU 90 / 100 = 0.9

@@ -11,9 +11,9 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from offroad_path.driving.counts import compare_rates, power, route_needed
-from offroad_path.evaluation.primaries import holm_levels, verdicts
 from offroad_path.evaluation.readme import PRIMARIES_HEAD, main, misstated
+from offroad_path.statistics.counts import compare_rates, power, route_needed
+from offroad_path.statistics.primaries import holm_levels, verdicts
 
 
 def test_the_exact_test_on_hand_made_counts():

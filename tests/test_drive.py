@@ -17,7 +17,7 @@ from offroad_path.driving.loop import LoopSettings, Setup, drive
 from offroad_path.driving.policies import OraclePolicy, Policy, StraightPolicy
 from offroad_path.driving.report import finding, score, versus_end_to_end
 from offroad_path.driving.vehicle import State, Vehicle, advance
-from offroad_path.evaluation.bootstrap import Resampling
+from offroad_path.statistics.bootstrap import Resampling
 from offroad_path.world.classes import DIRT, FOLIAGE, OBSTACLE, TREE, WATER
 from offroad_path.world.objects import Objects
 from offroad_path.world.terrain import Grid, Terrain

@@ -119,8 +119,8 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     working; gpu/dvc.yaml is dvc.yaml's stages under it (made by utils.scaled_pipeline), its grid gpu/params.yaml."""
     import yaml
 
+    from offroad_path.looks import axis_values
     from offroad_path.utils.scaled_pipeline import ROOT, render
-    from offroad_path.world.appearance import axis_values
 
     laptop, gpu = compose_config(), compose_config("experiment=gpu")
     assert all(gpu.world.appearance.weights[axis][value] > 0 for axis in gpu.world.appearance.weights for value in axis_values()[axis])

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.evaluation.bootstrap import Resampling
 from offroad_path.evaluation.metrics import counts, per_image_iou, pooled
 from offroad_path.evaluation.real import RealFrames, score_real, separability
 from offroad_path.label import label
+from offroad_path.statistics.bootstrap import Resampling
 
 KITTI_FOOTPRINT = ("label.footprint.width_m=1.8", "label.footprint.front_m=2.0", "label.footprint.rear_m=-2.7",
                    "label.footprint.camera_height_m=1.65", "label.disparity.num_disparities=128")  # fmt: skip
@@ -63,8 +63,8 @@ def hand_frames(labels: list[list[int]], direction: list[int], blocks: list[int]
 
 
 def test_diversity_and_the_label_centred_gain_by_hand():
-    from offroad_path.evaluation.bootstrap import Resampling
     from offroad_path.evaluation.real import real_row, separability
+    from offroad_path.statistics.bootstrap import Resampling
 
     frames = hand_frames([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 1], [0, 1, 1, 0]], direction=[-1, -1, 1, 0], blocks=[0, 0, 1, 1])
     perfect = real_row("perfect", frames.labels, frames, Resampling(1000, 0))

@@ -13,7 +13,7 @@ import torch
 from omegaconf import OmegaConf
 
 from offroad_path.evaluation.metrics import non_corresponding, per_image_iou, pooled
-from offroad_path.evaluation.scores import SCORES, Scores, accuracy, iou, iou_per_image, precision, recall
+from offroad_path.statistics.scores import SCORES, Scores, accuracy, iou, iou_per_image, precision, recall
 from offroad_path.utils.atomic import UnsafeOutputError
 from offroad_path.utils.outputs import Outputs, check_outputs
 from offroad_path.utils.rules import ConfigValueError, between, one_of, positive, setting, validate

@@ -46,19 +46,24 @@ def test_vehicle_stands_on_rolling_terrain(compose_config):
     assert speed.min() > 0.9 * cfg.speed_min_mps and speed.max() < 1.1 * cfg.speed_max_mps
 
 
+LAPTOP_SAMPLE = 6  # of the laptop preset's training drives, the first: building all of them doubles the file's time
+
+
 @pytest.fixture(scope="module")
 def laptop_worlds(compose_config):
     cfg = compose_config()
-    return cfg, [build_world(cfg.world, sequence_seed(cfg.synthesize.seed, i)) for i in range(cfg.synthesize.sequences)]
+    assert cfg.synthesize.sequences >= LAPTOP_SAMPLE
+    return cfg, [build_world(cfg.world, sequence_seed(cfg.synthesize.seed, i)) for i in range(LAPTOP_SAMPLE)]
 
 
-@pytest.mark.slow(seconds=44)
+@pytest.mark.slow(seconds=30)
 def test_laptop_preset_yields_enough_labels(laptop_worlds):
+    """At least 300 training labels from the preset's drives: the first drives' share of them."""
     cfg, worlds = laptop_worlds
     label = cfg.label
     settings = (label.distance_m, label.strategy, label.stride_m, label.min_motion_m)
     count = sum(len(select_segments(w.poses[:, :3, 3], *settings)) for w in worlds)
-    assert count >= 300
+    assert count >= 300 * LAPTOP_SAMPLE / cfg.synthesize.sequences
 
 
 @pytest.mark.slow(seconds=16)

@@ -20,6 +20,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from offroad_path.looks import axis_values
 from offroad_path.utils.rules import Rule, at_least, between, each, numbers, one_of, positive, rule, setting, validate
 from offroad_path.utils.threads import is_thread_setting
 
@@ -94,8 +95,6 @@ class SlipConfig:
 
 
 def _valid_looks(combinations: Any) -> bool:
-    from offroad_path.world.appearance import axis_values  # numpy only
-
     axes = axis_values()
     return all(c and all(axes.get(k) and v in axes[k] for k, v in c.items()) for c in combinations)
 
@@ -109,8 +108,6 @@ LOOKS = {
 
 
 def _valid_weights(weights: Any) -> bool:
-    from offroad_path.world.appearance import axis_values  # numpy only
-
     axes = axis_values()
     return all(
         axis in axes
@@ -455,7 +452,7 @@ class TemporalConfig:
 
 @dataclass
 class BootstrapConfig:
-    """Intervals by resampling the test set's blocks of driving (offroad_path.evaluation.bootstrap)."""
+    """Intervals by resampling the test set's blocks of driving (offroad_path.statistics.bootstrap)."""
 
     resamples: int = setting(at_least(100))
     seed: int = MISSING
@@ -464,7 +461,7 @@ class BootstrapConfig:
 
 @dataclass
 class PrimaryConfig:
-    """One primary question, declared before the run (offroad_path.evaluation.primaries)."""
+    """One primary question, declared before the run (offroad_path.statistics.primaries)."""
 
     claim: str = MISSING  # the claim it tests, in words
     # Which comparison answers it: <section>/<key> of the report that owns it, e.g.

@@ -104,8 +104,8 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
 def check_primaries(e: DictConfig) -> None:
     """Each primary names a comparison that can exist (before any work); one this run does not make
     (evaluate.runs without its runs) is reported as not measured."""
-    from offroad_path.evaluation.primaries import check_declared
     from offroad_path.evaluation.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
+    from offroad_path.statistics.primaries import check_declared
 
     pairs = comparisons(list(e.runs))
     scratch = {EVERY_SCRATCH_VS_PRIOR} if any(key.endswith("_vs_mean_path_prior") for key, *_ in pairs) else set()

@@ -30,7 +30,7 @@ from omegaconf import DictConfig
 from offroad_path.labelling import shards
 from offroad_path.labelling.labeller import check_inputs, label_sequence
 from offroad_path.odometry.steps import FALLBACKS
-from offroad_path.sequence.reader import find_sequences, open_sequence
+from offroad_path.sequence.reader import find_sequences, open_sequence, sequence_names
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
 from offroad_path.utils.outputs import Outputs
@@ -45,11 +45,6 @@ def _label_job(args: tuple[str, str, DictConfig]) -> dict:
     cv2.setNumThreads(1)
     root, out_dir, cfg = args
     return label_sequence(open_sequence(root), cfg, Path(out_dir))
-
-
-def sequence_names(roots: list[Path], in_dir: Path) -> list[str]:
-    """Output folder names: the path below in_dir (KITTI's sequences/05 becomes sequences_05)."""
-    return ["_".join(root.relative_to(in_dir).parts) or root.name for root in roots]
 
 
 def drift_metrics(drifts: list[dict]) -> dict[str, float]:

@@ -1,6 +1,6 @@
 """Scores of closed-loop drives, with hierarchical-bootstrap intervals (the test worlds, then the
-starts within each drawn world, then the training seeds: offroad_path.evaluation.bootstrap), the
-exact test of each primary comparison's counts (driving.counts), and the report's tables.
+starts within each drawn world, then the training seeds: offroad_path.statistics.bootstrap), the
+exact test of each primary comparison's counts (statistics.counts), and the report's tables.
 
 Per policy: interventions per km of route (progress along the reference drive, the same for every
 policy that finishes its drives, so that a paired difference is one of counts alone); autonomy,
@@ -9,7 +9,7 @@ come faster than one per intervention_s); the mean and 95th-percentile lateral o
 nearest centre line; water entries per km. Each path policy is compared with each end-to-end one on
 the same drives, paired: the interval of the difference in interventions per km (exploratory). The
 primaries of evaluate.conclusions that name an argument get the exact test, their interval at every
-Holm level, and the route their planning rates need for the target power (evaluation.primaries).
+Holm level, and the route their planning rates need for the target power (statistics.primaries).
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offroad_path.driving.counts import compare_rates, power_sentence, route_needed
 from offroad_path.driving.loop import DriveLog
-from offroad_path.evaluation.bootstrap import Interval, Resampling, drawn, paired_draws, whole
-from offroad_path.evaluation.primaries import check_declared, holm_levels, owned, recorded
+from offroad_path.statistics.bootstrap import Interval, Resampling, drawn, paired_draws, whole
+from offroad_path.statistics.counts import compare_rates, power_sentence, route_needed
+from offroad_path.statistics.primaries import check_declared, holm_levels, owned, recorded
 
 ARGUMENTS = {
     "steering": "(a) closed loop: does predicting the path drive better than predicting the steering?",
@@ -140,7 +140,7 @@ def versus_end_to_end(logs: dict[str, list[DriveLog]], end_to_end: list[str], re
 
 
 def primary(logs: dict[str, list[DriveLog]], name: str, key: str, conclusions) -> dict:
-    """A primary's entry (evaluation.primaries.recorded): the exact test of a's and b's pooled counts,
+    """A primary's entry (statistics.primaries.recorded): the exact test of a's and b's pooled counts,
     the rate ratio a / b at every Holm level (null 1), and with planning rates the route each policy
     drove against the route their power needs at Holm's strictest level (alpha / family). key: a_vs_b."""
     a, _, b = key.partition("_vs_")

@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from offroad_path.data.manifest import Sample, parse_boolean
-from offroad_path.evaluation.bootstrap import Interval
 from offroad_path.evaluation.metrics import pooled
-from offroad_path.evaluation.scores import iou as iou_score
 from offroad_path.evaluation.tables import fmt
+from offroad_path.statistics.bootstrap import Interval
+from offroad_path.statistics.scores import iou as iou_score
 from offroad_path.world.groups import GROUPS, OLD_LOOK
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ import torch
 from torchmetrics.functional.classification import binary_stat_scores
 from torchmetrics.functional.classification.precision_recall_curve import _adjust_threshold_arg, _binary_precision_recall_curve_compute
 
-from offroad_path.evaluation.scores import SCORES, Scores, iou_per_image
+from offroad_path.statistics.scores import SCORES, Scores, iou_per_image
 
 
 def counts(confidence: np.ndarray, target: np.ndarray, threshold: float = 0.5) -> np.ndarray:

@@ -35,10 +35,10 @@ import torch
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.loading import read
 from offroad_path.data.splitting import block_of
-from offroad_path.evaluation.bootstrap import Resampling, block_sums, mean, score_draws
 from offroad_path.evaluation.metrics import counts, non_corresponding, pooled
-from offroad_path.evaluation.scores import iou
 from offroad_path.evaluation.tables import method_title
+from offroad_path.statistics.bootstrap import Resampling, block_sums, mean, score_draws
+from offroad_path.statistics.scores import iou
 
 log = logging.getLogger(__name__)
 

@@ -12,17 +12,17 @@ import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.data.loading import load_maps
-from offroad_path.evaluation.bootstrap import Draws, Interval, mean
 from offroad_path.evaluation.conditions import ConditionTable, by_condition, read_conditions
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases
 from offroad_path.evaluation.metrics import Scores, non_corresponding, per_image_iou, pooled
-from offroad_path.evaluation.primaries import from_draws, owned
 from offroad_path.evaluation.real import RealFrames, RealRow, Separability, score_real, separability
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import BaselineRow, ResultRow, baseline_name, markdown_table, method_title, network_name, split_run_name
 from offroad_path.evaluation.temporal import TemporalRow, score_temporal
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, Uncertainty
+from offroad_path.statistics.bootstrap import Draws, Interval, mean
+from offroad_path.statistics.primaries import from_draws, owned
 
 log = logging.getLogger(__name__)
 
@@ -313,7 +313,7 @@ class RealFootage:
 class PrimaryQuestions:
     """The primaries evaluate answers (evaluate.conclusions: uncertainty/<key> and
     steering_from_paths/<key>), each with its hierarchical-bootstrap p-value and its interval at every
-    Holm level; the family's verdicts, with the drive's primaries, are the README's (evaluation.primaries)."""
+    Holm level; the family's verdicts, with the drive's primaries, are the README's (statistics.primaries)."""
 
     SECTIONS = ("uncertainty", "steering_from_paths")
 

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from offroad_path.data.manifest import Sample
-from offroad_path.evaluation.bootstrap import Interval
 from offroad_path.evaluation.conditions import read_conditions
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.report import TestSet
-from offroad_path.evaluation.scores import iou as iou_score
 from offroad_path.evaluation.tables import method_title
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
+from offroad_path.statistics.bootstrap import Interval
+from offroad_path.statistics.scores import iou as iou_score
 from offroad_path.world.groups import GROUPS
 
 TITLES = {key: title for key, title, _ in GROUPS}

@@ -26,13 +26,13 @@ from omegaconf import DictConfig
 from offroad_path.data.labels import LabelledSequence, read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
-from offroad_path.evaluation.bootstrap import Resampling, block_sums, paired_interval
 from offroad_path.evaluation.metrics import counts, pooled
-from offroad_path.evaluation.scores import iou
 from offroad_path.evaluation.tables import method_title
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
 from offroad_path.labelling.footprint import Occlusion, footprint_depth, footprint_for, path_mask, swept_polygons
 from offroad_path.postprocessing.temporal import TemporalFilter, warp_previous
+from offroad_path.statistics.bootstrap import Resampling, block_sums, paired_interval
+from offroad_path.statistics.scores import iou
 
 log = logging.getLogger(__name__)
 

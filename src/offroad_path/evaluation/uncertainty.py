@@ -1,9 +1,9 @@
 """The report's uncertainty section: a 95 % interval on every run's pooled IoU and a paired
 interval on every comparison the results table invites (network against network without
 pretraining, segmentation pretraining against none, post-processing against none), by the
-hierarchical bootstrap of evaluation.bootstrap (test worlds, their blocks of driving, training
+hierarchical bootstrap of statistics.bootstrap (test worlds, their blocks of driving, training
 seeds). A difference whose interval holds 0 is stated as "no difference measured"; the comparisons
-evaluate.conclusions declares primary are tested with Holm's correction (evaluation.primaries)."""
+evaluate.conclusions declares primary are tested with Holm's correction (statistics.primaries)."""
 
 from __future__ import annotations
 
@@ -19,11 +19,11 @@ from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
 from offroad_path.errors import InputError
-from offroad_path.evaluation.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
-from offroad_path.evaluation.scores import SCORES, Score, iou
 from offroad_path.evaluation.tables import method_title, split_run_name
+from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
+from offroad_path.statistics.scores import SCORES, Score, iou
 
 
 def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> list[tuple[str, int]]:

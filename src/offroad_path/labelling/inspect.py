@@ -27,7 +27,7 @@ import numpy as np
 from offroad_path.errors import CommandParser, InputError, clear_errors, missing_extra, one_line, positive_int
 from offroad_path.labelling.footprint import VehicleFootprint, footprint_for, swept_polygons
 from offroad_path.labelling.quality import FootprintCheck, LabelRun, ratio_curve, summary_figure
-from offroad_path.sequence.reader import Sequence, find_sequences, open_sequence
+from offroad_path.sequence.reader import Sequence, find_sequences, open_sequence, sequence_names
 from offroad_path.stage import stop_cleanly_on_sigterm
 from offroad_path.utils.atomic import atomic_directory
 from offroad_path.utils.outputs import Outputs, claimed
@@ -45,7 +45,6 @@ def label_runs(labels: Path) -> dict[str, LabelRun]:
 
 
 def recordings_by_name(recording: Path) -> dict[str, Sequence]:
-    from offroad_path.label import sequence_names
 
     roots = find_sequences(recording)
     return {name: open_sequence(root) for name, root in zip(sequence_names(roots, recording), roots, strict=True)}

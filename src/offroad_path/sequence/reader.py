@@ -119,6 +119,12 @@ def find_sequences(root: str | Path) -> list[Path]:
     return found
 
 
+def sequence_names(roots: list[Path], in_dir: Path) -> list[str]:
+    """Output folder names of sequences found under in_dir: the path below it (KITTI's sequences/05
+    becomes sequences_05)."""
+    return ["_".join(root.relative_to(in_dir).parts) or root.name for root in roots]
+
+
 def open_sequence(root: str | Path) -> Sequence:
     root = Path(root)
     calib_path = root / "calib.txt"

@@ -12,12 +12,12 @@ from torchmetrics import Metric, MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassJaccardIndex
 from torchmetrics.functional.classification import binary_stat_scores
 
-from offroad_path.evaluation.scores import SCORES
 from offroad_path.models import build_model
+from offroad_path.statistics.scores import SCORES
 
 
 class PathScore(Metric):
-    """One of the paper's scores (evaluation.scores) of the path class, from tp, fp, tn, fn summed
+    """One of the paper's scores (statistics.scores) of the path class, from tp, fp, tn, fn summed
     over an epoch and synced across DDP ranks: training logs what the evaluation reports."""
 
     full_state_update = False

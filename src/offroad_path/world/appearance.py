@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.looks import AXIS_VALUES, axis_values
 from offroad_path.world.classes import BASE_COLORS, DIRT, FOLIAGE, GRASS, TREE
 
 APPEARANCE_STREAM = 2  # spawn key: test worlds use 1 (world.held_out.TEST_STREAM)
@@ -51,8 +52,8 @@ LIGHTS: dict[str, tuple] = {
     "hazy": ((20.0, 60.0), 0.55, 0.5, (1.0, 0.95, 0.88), (55.0, 110.0), (0.3, 0.6)),
     "overcast": ((30.0, 60.0), 0.0, 0.85, (1.0, 1.0, 1.0), (110.0, 200.0), (0.97, 1.0)),
 }
-VEGETATION = ("broadleaf", "conifer", "mixed", "scrub")
-AXES = ("track", "season", "light", "vegetation")
+VEGETATION = AXIS_VALUES["vegetation"]
+AXES = tuple(AXIS_VALUES)
 DRAWS = ("training", "full_variety", "held_out")  # how a world's look is drawn (draw_appearance's `draw`)
 
 
@@ -168,8 +169,3 @@ def rut_colour(look: Appearance, albedo: np.ndarray) -> tuple[np.ndarray, float]
         return None
     colour, strength = ruts
     return (albedo[GRASS] * 0.7 if colour == "grass" else np.asarray(colour)), strength
-
-
-def axis_values() -> dict[str, list[str]]:
-    """Every value each axis of `world.appearance.held_out` may name."""
-    return {"track": list(TRACKS), "season": list(SEASONS), "light": list(LIGHTS), "vegetation": list(VEGETATION)}

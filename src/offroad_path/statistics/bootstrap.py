@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offroad_path.evaluation.scores import Score, ratio
+from offroad_path.statistics.scores import Score, ratio
 
 RESAMPLES = 1000
 LEVEL = 0.95
@@ -35,7 +35,7 @@ LEVEL = 0.95
 
 def mean(s: np.ndarray) -> np.ndarray:
     """The mean of a per-item value, from statistics (..., 2) = (sum of values, count): a mean error
-    resampled like a pooled score (the confusion scores themselves are evaluation.scores')."""
+    resampled like a pooled score (the confusion scores themselves are statistics.scores')."""
     return ratio(s[..., 0], s[..., 1])
 
 

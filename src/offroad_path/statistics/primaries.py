@@ -6,8 +6,8 @@ Each stage that answers a primary records it in its metrics (`primaries`): the e
 value of no difference (`null`: 0 for a difference, 1 for a rate ratio), a two-sided p-value, and
 the interval at each level Holm's procedure can ask for, 1 - alpha / j for j = 1 .. m (m: the
 family's size), so that a reader of the metrics draws the family's verdicts without the resamples.
-evaluate answers with the hierarchical bootstrap (evaluation.bootstrap.Draws), drive with an exact
-test on interventions (driving.counts). `verdicts` then orders the family's p-values and gives each
+evaluate answers with the hierarchical bootstrap (statistics.bootstrap.Draws), drive with an exact
+test on interventions (statistics.counts). `verdicts` then orders the family's p-values and gives each
 primary its Holm level: 1 - alpha / (m - k) for the k-th smallest p (from 0) while every smaller
 one is rejected, and from the first that is not, the level that one failed at; so a primary's
 shown interval excludes the null exactly when Holm rejects it (up to the bootstrap's ties).
@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from offroad_path.errors import InputError
-from offroad_path.evaluation.bootstrap import Draws, Interval
+from offroad_path.statistics.bootstrap import Draws, Interval
 
 Levels = list[list[float]]  # [[low, high] at 1 - alpha / j for j = 1 .. m]
 

@@ -1,0 +1,80 @@
+"""The package's import graph runs downward only: each module imports from its own layer or below,
+and no two packages import each other (the layers are declared here and in docs/design.md)."""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "src" / "offroad_path"
+STAGES = ["calibrate", "drive", "evaluate", "export", "ingest", "label", "postprocess", "predict", "pretrain", "split",
+          "synthesize", "train", "train_steering"]  # fmt: skip
+LAYERS = [  # lowest first; a unit is a subpackage or a top-level module of offroad_path
+    ["offroad_path", "errors", "utils"],
+    ["config", "looks", "stage", "geometry", "statistics", "viz"],
+    ["sequence"],
+    ["recordings", "world", "odometry", "data", "models", "postprocessing"],
+    ["labelling", "training"],
+    ["steering", "inference"],
+    ["evaluation", "driving"],
+    STAGES,
+]
+LAYER = {unit: k for k, units in enumerate(LAYERS) for unit in units}
+
+
+def unit(module: str) -> str:
+    """offroad_path.evaluation.bootstrap -> evaluation; offroad_path.label -> label; offroad_path -> offroad_path."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
+
+
+def imports() -> list[tuple[str, str, str]]:
+    """(importing unit, imported unit, where) for every import of offroad_path, at any depth of a module."""
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__")
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("offroad_path"):
+                targets = [f"{node.module}.{a.name}" for a in node.names] if node.module == "offroad_path" else [node.module]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names if a.name.startswith("offroad_path")]
+            else:
+                continue
+            here = f"{path.relative_to(PACKAGE)}:{node.lineno}"
+            found += [(unit(module), unit(t) if unit(t) in LAYER else "offroad_path", here) for t in targets]
+    return found
+
+
+def test_every_unit_has_a_layer():
+    modules = {p.stem for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
+    packages = {p.parent.name for p in PACKAGE.glob("*/*.py")}
+    assert (modules | packages) - set(LAYER) == set(), "declare its layer here and in docs/design.md"
+
+
+def test_no_import_reaches_a_higher_layer():
+    upward = [f"{where}: {a} imports {b}" for a, b, where in imports() if a != b and LAYER[b] > LAYER[a]]
+    assert upward == []
+
+
+def test_no_two_packages_import_each_other():
+    edges = defaultdict(set)
+    for a, b, _ in imports():
+        if a != b:
+            edges[a].add(b)
+    mutual = sorted({tuple(sorted((a, b))) for a in edges for b in edges[a] if a in edges.get(b, set())})
+    assert mutual == []
+
+
+@pytest.mark.parametrize(("source", "upward"), [("from offroad_path.evaluation.sections import x\n", True),
+                                                ("from offroad_path.errors import InputError\n", False)])  # fmt: skip
+def test_the_check_sees_an_upward_import(tmp_path, monkeypatch, source, upward):
+    """The graph is read from the source: a config module importing evaluation is caught."""
+    package = tmp_path / "offroad_path"
+    package.mkdir()
+    (package / "config.py").write_text(source)
+    monkeypatch.setattr(f"{__name__}.PACKAGE", package)
+    caught = [a for a, b, _ in imports() if LAYER[b] > LAYER[a]]
+    assert bool(caught) is upward
