@@ -10,14 +10,21 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 from helpers import ROOT
 from omegaconf.errors import ConfigAttributeError, ReadonlyConfigError
-from test_dvc_deps import STAGES
 
-from offroad_path.stage import SHARED, check_search_extra, reads
+from offroad_path.stage import SHARED, check_search_extra, reads, stage_modules
 
-COMMANDS = ["synthesize", "ingest", "label", "split", "pretrain", "train", "postprocess", "evaluate", "train_steering", "predict", "export"]
+COMMANDS = stage_modules()  # every module with a @reads stage: a new stage is checked without being listed here
 GROUPS = {p.name for p in (ROOT / "conf").iterdir() if p.is_dir()} - {"experiment", "hparams_search"}  # presets, not config keys
+
+STAGES = yaml.safe_load((ROOT / "dvc.yaml").read_text())["stages"]
+
+
+def test_the_stages_are_the_modules_that_declare_one():
+    assert {"synthesize", "label", "train", "evaluate", "drive", "predict"} <= set(COMMANDS)
+    assert "stage" not in COMMANDS and "config" not in COMMANDS
 
 
 def stage_of(command: str):

@@ -22,6 +22,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import hydra
@@ -42,6 +43,13 @@ log = logging.getLogger("offroad_path")
 # Top-level values every stage may read (conf/config.yaml): the training seed, whether an interrupted
 # training run resumes, the process's threads, the run's experiment name (an MLflow tag).
 SHARED = ("seed", "resume", "threads", "experiment_name")
+
+
+def stage_modules() -> list[str]:
+    """Every stage, `python -m offroad_path.<name>`: the package's top-level modules that declare a
+    function with @reads (read from their source: listing them imports none)."""
+    return sorted(p.stem for p in Path(__file__).parent.glob("*.py") if "\n@reads(" in p.read_text())
+
 
 Stage = Callable[[DictConfig], Any]
 

@@ -90,16 +90,13 @@ def checkpoint_of(name: str, d, seed: int) -> Path | None:
     return Path(d.runs_dir) / name.removesuffix(TEMPORAL) / f"seed{seed}" / "checkpoints" / "best.ckpt"
 
 
-PILOTNET_KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")
-PILOTNET_TARGET_KEYS = ("target", "lock_deg", "wheelbase_m")  # a curvature PilotNet's (absent from older checkpoints: angle)
-
-
 def pilotnet_checkpoint(path: Path) -> dict:
     """A train_steering checkpoint (weights_only); CheckpointError naming the file for any other."""
+    from offroad_path.steering.task import SteeringTask
     from offroad_path.training.checkpoints import CheckpointError, load_checkpoint
 
     saved = load_checkpoint(path)
-    if missing := [k for k in PILOTNET_KEYS if k not in saved["hyper_parameters"]]:
+    if missing := [k for k in SteeringTask.KEYS if k not in saved["hyper_parameters"]]:
         raise CheckpointError(f"{path}: not a PilotNet checkpoint of train_steering (no {', '.join(missing)} among its hyper-parameters)")
     return saved
 
@@ -115,7 +112,7 @@ def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
 
         saved = pilotnet_checkpoint(checkpoint_of(name, d, seed))
         hp = saved["hyper_parameters"]
-        task = SteeringTask(**{k: hp[k] for k in PILOTNET_KEYS}, **{k: hp[k] for k in PILOTNET_TARGET_KEYS if k in hp})
+        task = SteeringTask.from_hyperparameters(hp)
         load_weights(task, checkpoint_of(name, d, seed), saved)
         return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]), name, task.max_curvature)
     from offroad_path.inference.runners import TorchModel

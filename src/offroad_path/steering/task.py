@@ -46,15 +46,20 @@ class SteeringTask(BaseTask):
         if target == "curvature" and not (lock_deg and wheelbase_m):
             raise ValueError("a curvature PilotNet needs the recording vehicle's lock_deg and wheelbase_m")
         super().__init__()
-        self.save_hyperparameters()
-        self.configure()
+
+    KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")  # every checkpoint's
+    TARGET_KEYS = ("target", "lock_deg", "wheelbase_m")  # a curvature PilotNet's (absent from older checkpoints: angle)
 
     @classmethod
     def from_config(cls, s: DictConfig) -> SteeringTask:
         """From the `steering` config node (conf/steering/default.yaml)."""
-        keys = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay", "target")
         vehicle = {"lock_deg": s.lock_deg, "wheelbase_m": s.wheelbase_m} if s.target == "curvature" else {}
-        return cls(**{k: s[k] for k in keys}, **vehicle)
+        return cls(**{k: s[k] for k in cls.KEYS}, target=s.target, **vehicle)
+
+    @classmethod
+    def from_hyperparameters(cls, hp: dict) -> SteeringTask:
+        """From a checkpoint's hyper-parameters, of this version or an earlier one."""
+        return cls(**{k: hp[k] for k in cls.KEYS}, **{k: hp[k] for k in cls.TARGET_KEYS if k in hp})
 
     @property
     def max_curvature(self) -> float | None:

@@ -44,8 +44,13 @@ class BaseTask(L.LightningModule):
     monitor: str
     mode: str  # "max" or "min"
 
-    def configure(self) -> None:
-        """Call at the end of a subclass's __init__, after save_hyperparameters."""
+    def __init__(self) -> None:
+        """Saves the subclass's __init__ arguments as the checkpoint's hyper-parameters (Lightning reads
+        them from the calling __init__ frames, as torchgeo's BaseTask does; the run logs the whole
+        resolved config instead), then builds the network, loss and metrics from them: a subclass's
+        __init__ checks its arguments and calls super().__init__(), nothing more."""
+        super().__init__()
+        self.save_hyperparameters(logger=False)
         self.configure_models()
         self.configure_losses()
         self.configure_metrics()
@@ -95,8 +100,6 @@ class SegmentationTask(BaseTask):
         channels_last: bool,
     ):
         super().__init__()
-        self.save_hyperparameters(logger=False)  # the run logs the whole resolved config instead
-        self.configure()
 
     @classmethod
     def for_inference(cls, hp: dict) -> SegmentationTask:
