@@ -4,6 +4,8 @@ truth, labels against ground-truth labels, the report's quality gates, and bad i
 from __future__ import annotations
 
 import csv
+import os
+import platform
 import shutil
 import sqlite3
 import subprocess
@@ -13,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from helpers import file_hashes, openblas_cores, without_vector_kernels
 
 from offroad_path.config import OdometryConfig
 from offroad_path.errors import InputError
@@ -232,3 +235,32 @@ def test_frame_to_frame_odometry_on_the_real_kitti_snippet(compose_config, kitti
     run = run_odometry(seq, OdometryConfig(**compose_config("label.odometry.method=frame_to_frame").label.odometry))
     assert not run.failed.any()
     assert drift(run.poses, seq.poses, 20.0, run.pieces)[0].translation_drift_pct < 1.5
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="the kernel sets named are x86-64's")
+@pytest.mark.slow(seconds=45)
+def test_the_label_stage_writes_the_same_bytes_on_every_cpu_kernel_set(tmp_path):
+    """The committed run's labels differed between an Intel AVX-512 and an AMD AVX2 machine: OpenBLAS's
+    kernels (NumPy's, and the copy OpenCV's wheel bundles for solvePnPRansac and Rodrigues) and OpenCV's
+    AVX2 kernels rounded differently. Labels, poses and metrics: the same bytes under each OpenBLAS kernel
+    set the CPU runs and with OpenCV's and NumPy's vector dispatch off."""
+    world = tmp_path / "world"
+    tiny = ["synthesize.sequences=1", "world.frames=24", "world.width=256", "world.height=144", "synthesize.test_worlds.min_blocks=0"]
+    cli = [sys.executable, "-m", "offroad_path.synthesize", *tiny, f"synthesize.out_dir={world}", f"hydra.run.dir={tmp_path / 'h'}"]
+    subprocess.run(cli, check=True, capture_output=True)
+
+    def label(name: str, env: dict[str, str]) -> dict[str, str]:
+        out = tmp_path / name
+        cli = [sys.executable, "-m", "offroad_path.label", f"label.in_dir={world}", f"label.out_dir={out / 'labels'}",
+               f"label.metrics_path={out / 'label.json'}", "label.distance_m=4", "label.stride_m=1", "mlflow.enabled=false",
+               f"hydra.run.dir={tmp_path / 'h'}"]  # fmt: skip
+        run = subprocess.run(cli, env={**os.environ, **env}, capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr[-2000:]
+        return file_hashes(out)
+
+    reference = label("default", {})
+    assert any(name.startswith("labels/") and name.endswith(".png") for name in reference) and "label.json" in reference
+    cores = openblas_cores()
+    other = next(core for core in ("Sandybridge", "Haswell") if core in cores)  # rounded otherwise before the fix
+    for name, env in [("scalar", without_vector_kernels()), (other, {"OPENBLAS_CORETYPE": other})]:
+        assert label(name, env) == reference, f"{name} labelled other bytes"

@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.geometry.exact import pinned_blas
 from offroad_path.labelling import shards
 from offroad_path.labelling.labeller import check_inputs, label_sequence
 from offroad_path.odometry.steps import FALLBACKS
@@ -43,6 +44,9 @@ log = logging.getLogger("offroad_path.label")
 
 def _label_job(args: tuple[str, str, DictConfig]) -> dict:
     cv2.setNumThreads(1)
+    # OpenCV's kernels chosen by CPU (AVX2, AVX-512, IPP's) round differently from its baseline ones
+    # (SSE2/SSE3, on every x86-64 CPU): the corners, tracks and PnP, and so the labels, moved with them.
+    cv2.setUseOptimized(False)
     root, out_dir, cfg = args
     return label_sequence(open_sequence(root), cfg, Path(out_dir))
 
@@ -141,7 +145,8 @@ def label(cfg: DictConfig) -> dict:
             summaries = [summary for _, summary in merged]
         else:
             jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
-            summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots], "label")
+            # in workers whose OpenBLAS (NumPy's and OpenCV's) takes the same kernels on every CPU: the same labels
+            summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots], "label", env=pinned_blas())
         metrics = run_metrics(summaries, in_dir, need_labels=not sharded(cfg))
         if metrics.get("one_camera_sequences"):
             log.warning(

@@ -7,12 +7,14 @@ area swept between consecutive footprints.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from offroad_path.errors import InputError
+from offroad_path.geometry.exact import dot_rows, matmul, norm_rows, rigid_inverse
 from offroad_path.sequence.meta import FOOTPRINT
 from offroad_path.sequence.reader import Sequence
 
@@ -39,10 +41,10 @@ class VehicleFootprint:
                 [-w, self.camera_height_m, self.front_m],
             ]
         )
-        tilt = np.deg2rad(self.camera_pitch_deg)
+        tilt = math.radians(self.camera_pitch_deg)  # math's cos and sin: correctly rounded on every CPU
         # Vehicle-level (x, down, forward) to the camera pitched down by `tilt` about x.
-        rotation = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(tilt), -np.sin(tilt)], [0.0, np.sin(tilt), np.cos(tilt)]])
-        return level @ rotation.T
+        rotation = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(tilt), -math.sin(tilt)], [0.0, math.sin(tilt), math.cos(tilt)]])
+        return matmul(level, rotation.T)
 
 
 def footprint_for(seq: Sequence, cfg) -> VehicleFootprint:
@@ -93,9 +95,9 @@ def swept_polygons(poses: np.ndarray, f0: int, fn: int, footprint: VehicleFootpr
     Each frame's footprint, plus the quads its left and right edges sweep from one frame to the
     next (on a turn, consecutive rectangles leave gaps at their corners without them).
     """
-    f0_from_world = np.linalg.inv(poses[f0])
+    f0_from_world = rigid_inverse(poses[f0])
     corners = np.c_[footprint.corners(), np.ones(4)]
-    frames = [(f0_from_world @ poses[j] @ corners.T).T[:, :3] for j in range(f0 + 1, fn + 1)]
+    frames = [matmul(matmul(f0_from_world, poses[j]), corners.T).T[:, :3] for j in range(f0 + 1, fn + 1)]
     polygons = list(frames)
     for prev, cur in itertools.pairwise(frames):
         polygons.append(np.array([prev[0], prev[3], cur[3], cur[0]]))  # left edge, rear to front
@@ -122,7 +124,7 @@ def footprint_depth(polygons: list[np.ndarray], K: np.ndarray, size: tuple[int, 
         for i in range(1, len(clipped) - 1):
             tri = clipped[[0, i, i + 1]]
             normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
-            if np.linalg.norm(normal) < 1e-12:
+            if norm_rows(normal) < 1e-12:
                 continue
             uv = np.clip(project(K, tri), -1e6, 1e6)
             c0, r0 = np.maximum(np.floor(uv.min(axis=0)).astype(int), 0)
@@ -134,9 +136,9 @@ def footprint_depth(polygons: list[np.ndarray], K: np.ndarray, size: tuple[int, 
             cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, shift=SUBPIXEL_BITS)
             inside = mask.astype(bool)
             ray = rays[r0:r1, c0:c1][inside]
-            denom = ray @ normal
+            denom = dot_rows(ray, normal)
             with np.errstate(divide="ignore", invalid="ignore"):
-                z = np.where(np.abs(denom) > 1e-12, (tri[0] @ normal) / denom, np.inf)
+                z = np.where(np.abs(denom) > 1e-12, dot_rows(tri[0], normal) / denom, np.inf)
             window = depth[r0:r1, c0:c1]
             window[inside] = np.minimum(window[inside], np.where(z > 0, z, np.inf))
     return depth

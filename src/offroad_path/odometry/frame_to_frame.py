@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from offroad_path.config import OdometryConfig
+from offroad_path.geometry.exact import matmul, rigid_inverse, solve
 from offroad_path.odometry.features import FrontEnd
 from offroad_path.odometry.steps import StepResult
 from offroad_path.sequence.calibration import StereoCalibration
@@ -62,7 +63,7 @@ class FrameToFrameOdometry:
         except cv2.error as e:  # degenerate geometry inside OpenCV: a failed step, not a crash
             result = StepResult(False, np.eye(4), len(prev.xyz), 0, 0, f"OpenCV failed: {e.err}")
         self._steps.append(result)
-        self._poses.append(self._poses[-1] @ np.linalg.inv(result.motion))
+        self._poses.append(matmul(self._poses[-1], rigid_inverse(result.motion)))
         return result
 
     def finish(self) -> tuple[np.ndarray, list[StepResult]]:
@@ -86,7 +87,7 @@ class FrameToFrameOdometry:
             return StepResult(False, np.eye(4), n, 0, 0, f"only {n} stereo features in the previous frame")
         # Constant-velocity prediction as the trackers' starting point: large image motion near
         # the bottom of the view is then a small correction, which Lucas-Kanade does without bias.
-        guess_l, guess_r = self.front.project(prev.xyz @ self._velocity[:3, :3].T + self._velocity[:3, 3])
+        guess_l, guess_r = self.front.project(matmul(prev.xyz, self._velocity[:3, :3].T) + self._velocity[:3, 3])
         next_l, ok_l = self.front.track(prev.left, left, prev.points_l, guess_l)
         next_r, ok_r = self.front.track(prev.right, right, prev.points_r, guess_r)
         ok_r &= ok_l
@@ -108,7 +109,7 @@ class FrameToFrameOdometry:
         has_right = ~np.isnan(uv_r[:, 0])
         fb = self.fx * self.baseline
         for _ in range(self.cfg.refine_iterations):
-            p = xyz @ motion[:3, :3].T + motion[:3, 3]
+            p = matmul(xyz, motion[:3, :3].T) + motion[:3, 3]
             x, y, z = p.T
             iz = 1.0 / z
             # Residuals: left u, v; right u (its v equals the left v on rectified images).
@@ -123,16 +124,17 @@ class FrameToFrameOdometry:
             r = np.concatenate(res)
             J = np.concatenate(jac)
             weight = np.where(np.abs(r) <= self.cfg.huber_px, 1.0, self.cfg.huber_px / np.abs(r))
-            H = J.T @ (J * weight[:, None])
-            g = J.T @ (weight * r)
+            # J^T W J and J^T W r as sums over the rows, in row order: no BLAS (geometry.exact)
+            H = (J[:, :, None] * (J * weight[:, None])[:, None, :]).sum(axis=0)  # (6, 6)
+            g = (J * (weight * r)[:, None]).sum(axis=0)  # (6,)
             try:
-                delta = -np.linalg.solve(H, g)
+                delta = -solve(H, g)
             except np.linalg.LinAlgError:
                 break
             update = np.eye(4)
             update[:3, :3] = cv2.Rodrigues(delta[3:])[0]
             update[:3, 3] = delta[:3]
-            motion = update @ motion
+            motion = matmul(update, motion)
             if np.linalg.norm(delta) < 1e-8:
                 break
         return motion

@@ -32,6 +32,7 @@ import numpy as np
 from gtsam_unstable import ProjectionFactorPPPCCal3_S2
 
 from offroad_path.config import OdometryConfig
+from offroad_path.geometry.exact import matmul, power, rigid_inverse
 from offroad_path.odometry.features import FrontEnd
 from offroad_path.odometry.steps import FALLBACKS, StepResult
 from offroad_path.sequence.calibration import StereoCalibration
@@ -116,7 +117,7 @@ class WindowedOdometry:
             return
         for s in self._steps[self._ref.frame : k]:  # every step since the last tracked frame
             s.ok, s.reason = False, s.reason or step.reason
-        self._poses[k] = self._poses[self._ref.frame] @ np.linalg.matrix_power(np.linalg.inv(self._velocity), k - self._ref.frame)
+        self._poses[k] = matmul(self._poses[self._ref.frame], power(rigid_inverse(self._velocity), k - self._ref.frame))
         self._interpolate_skipped(self._ref.frame, k)
         self._begin_piece(k, left, right)
 
@@ -128,14 +129,14 @@ class WindowedOdometry:
             for s in self._steps[last:]:
                 s.ok, s.reason = False, s.reason or "the sequence ended on frames that could not be tracked"
             for k in range(last + 1, n):
-                self._poses[k] = self._poses[k - 1] @ np.linalg.inv(self._velocity)
+                self._poses[k] = matmul(self._poses[k - 1], rigid_inverse(self._velocity))
         for k, (keyframe, relative) in self._anchors.items():  # follow their keyframes' adjustments
-            self._poses[k] = self._poses[keyframe] @ relative
+            self._poses[k] = matmul(self._poses[keyframe], relative)
         poses = np.array(self._poses)
         steps = [
             StepResult(
                 s.ok,
-                np.linalg.inv(poses[k + 1]) @ poses[k],
+                matmul(rigid_inverse(poses[k + 1]), poses[k]),
                 s.features,
                 s.tracked,
                 s.inliers,
@@ -162,12 +163,12 @@ class WindowedOdometry:
         the fallbacks in order; None, with step.reason, when all fail."""
         ref, cfg = self._ref, self.cfg
         gap = k - ref.frame
-        predicted = self._poses[ref.frame] @ np.linalg.matrix_power(np.linalg.inv(self._velocity), gap)
+        predicted = matmul(self._poses[ref.frame], power(rigid_inverse(self._velocity), gap))
         for fallback, wide in [("", False), (FALLBACKS[0], False), (FALLBACKS[1], True)]:
             if fallback == "more_features":
                 self._add_landmarks(ref, factor=cfg.fallback_feature_factor)
             xyz = self._points[ref.ids]
-            guess = self.front.project(_transform(np.linalg.inv(predicted), xyz))[0]
+            guess = self.front.project(_transform(rigid_inverse(predicted), xyz))[0]
             uv, ok = self.front.track(ref.left, left, ref.uv, guess, wide=wide)
             step.features, step.tracked = len(ref.ids), int(ok.sum())
             world_to_camera, inlier = self.front.pnp(xyz[ok], uv[ok])
@@ -175,7 +176,7 @@ class WindowedOdometry:
             if world_to_camera is not None and step.inliers >= cfg.min_inliers:
                 step.fallback = fallback if gap == 1 else "skipped_frame"
                 chosen = np.flatnonzero(ok)[inlier]
-                return np.linalg.inv(world_to_camera), ref.ids[chosen], uv[chosen]
+                return rigid_inverse(world_to_camera), ref.ids[chosen], uv[chosen]
             step.reason = f"only {step.inliers} PnP inliers of {step.tracked} tracks after more features and a wider search"
         return None
 
@@ -189,17 +190,17 @@ class WindowedOdometry:
         if self._is_keyframe(pose, len(ids)):
             self._steps[k - 1].keyframe = True
             # Stereo matches start where the landmark's current depth says they should be.
-            guess = self.front.project(_transform(np.linalg.inv(pose), self._points[ids]))[1]
+            guess = self.front.project(_transform(rigid_inverse(pose), self._points[ids]))[1]
             uv_r, ok = self.front.stereo_match(left, right, uv, guess)
             self._window.append(_Keyframe(k, ids[ok], uv[ok], uv_r[ok]))
             self._window = self._window[-self.cfg.window :]
             self._adjust()
         else:
             keyframe = self._window[-1].frame
-            self._anchors[k] = (keyframe, np.linalg.inv(self._poses[keyframe]) @ pose)
+            self._anchors[k] = (keyframe, matmul(rigid_inverse(self._poses[keyframe]), pose))
         self._interpolate_skipped(ref.frame, k)
         if k - ref.frame == 1:
-            self._velocity = np.linalg.inv(self._poses[k]) @ self._poses[ref.frame]
+            self._velocity = matmul(rigid_inverse(self._poses[k]), self._poses[ref.frame])
         self._ref = _Reference(k, left, right, ids, uv)
         if self._window[-1].frame == k:
             self._add_landmarks(self._ref, factor=1)
@@ -252,16 +253,16 @@ class WindowedOdometry:
         """Poses of the frames skipped between tracked frames a and b, spaced evenly on the motion."""
         if b - a < 2:
             return
-        motion = np.linalg.inv(self._poses[a]) @ self._poses[b]  # frame b in frame a
+        motion = matmul(rigid_inverse(self._poses[a]), self._poses[b])  # frame b in frame a
         rvec = cv2.Rodrigues(motion[:3, :3])[0]
         for k in range(a + 1, b):
             s = (k - a) / (b - a)
             part = np.eye(4)
             part[:3, :3], part[:3, 3] = cv2.Rodrigues(rvec * s)[0], motion[:3, 3] * s
-            self._poses[k] = self._poses[a] @ part
+            self._poses[k] = matmul(self._poses[a], part)
             if self._window:  # follow the latest keyframe's later adjustments, as located frames do
                 keyframe = self._window[-1].frame
-                self._anchors[k] = (keyframe, np.linalg.inv(self._poses[keyframe]) @ self._poses[k])
+                self._anchors[k] = (keyframe, matmul(rigid_inverse(self._poses[keyframe]), self._poses[k]))
 
     # --- bundle adjustment --------------------------------------------------------------------
 
@@ -389,4 +390,4 @@ _RIGHT_OF_LEFT, _RIGHT_CALIBRATION = gtsam.symbol("e", 0), gtsam.symbol("c", 0)
 
 def _transform(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     """Apply a 4x4 rigid transform to (N, 3) points."""
-    return xyz @ T[:3, :3].T + T[:3, 3]
+    return matmul(xyz, T[:3, :3].T) + T[:3, 3]

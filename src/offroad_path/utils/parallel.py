@@ -106,13 +106,13 @@ def stop_workers() -> None:
             process.join()
 
 
-def _start(count: int) -> list[tuple[Any, Connection]]:
-    """`count` spawned workers, each with its end of a pipe. The thread variables must be set before
-    a worker imports numpy, hence spawn: BLAS threads in every worker would fight over the cores
-    (here, that cost 40 % of the rendering throughput)."""
+def _start(count: int, env: dict[str, str]) -> list[tuple[Any, Connection]]:
+    """`count` spawned workers, each with its end of a pipe, and `env` besides one thread each. The
+    thread variables must be set before a worker imports numpy, hence spawn: BLAS threads in every
+    worker would fight over the cores (here, that cost 40 % of the rendering throughput)."""
     context = mp.get_context("spawn")
-    saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
-    os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
+    saved = {k: os.environ.get(k) for k in (*THREAD_VARIABLES, *env)}
+    os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1") | env)
     try:
         started = []
         for _ in range(count):
@@ -159,27 +159,37 @@ def _receive(process: Any, conn: Connection, ready: set, job: str) -> Any:
     raise InputError(job, f"its worker process was {_death(process)}; nothing was written")
 
 
-def map_processes(
-    fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int = 0, names: Sequence[str] | None = None, progress: str | None = None
+def map_processes(  # noqa: PLR0913
+    fn: Callable[[Any], Any],
+    jobs: Sequence[Any],
+    workers: int = 0,
+    names: Sequence[str] | None = None,
+    progress: str | None = None,
+    *,
+    env: dict[str, str] | None = None,
 ) -> list[Any]:
     """[fn(job) for job in jobs], on `workers` processes (0: one per core), results in job order.
 
     `fn` should call cv2.setNumThreads(1) (one process per core). The first failing job stops the
     rest; a worker that dies raises InputError naming its job (`names`, default: its number).
     progress: what the jobs do, for a bar (a terminal) or a log line per finished job (utils.progress).
+    env: variables the workers start with (read when they load their libraries); given, every job
+    runs in a worker, even where one would do.
     """
     names = names or [f"job {i}" for i in range(len(jobs))]
     shown = Progress(progress, len(jobs), "jobs") if progress else None
     try:
-        return _map(fn, jobs, workers, names, shown)
+        return _map(fn, jobs, workers, names, shown, env=env)
     finally:
         if shown is not None:
             shown.close()
 
 
-def _map(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int, names: Sequence[str], shown: Progress | None) -> list[Any]:
+def _map(  # noqa: PLR0913
+    fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int, names: Sequence[str], shown: Progress | None, *, env: dict[str, str] | None
+) -> list[Any]:
     workers = min(workers or os.cpu_count() or 1, len(jobs))
-    if workers <= 1:
+    if workers <= 1 and env is None:
         results_in_order = []
         for job, name in zip(jobs, names, strict=True):
             results_in_order.append(fn(job))
@@ -189,7 +199,7 @@ def _map(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int, names: Seq
     results: dict[int, Any] = {}
     pending = iter(range(len(jobs)))
     doing: dict[int, int] = {}  # worker -> its job
-    pool = _start(workers)
+    pool = _start(max(workers, 1), env or {})
 
     def hand_out(w: int) -> None:
         i = next(pending, None)

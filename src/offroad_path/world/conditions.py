@@ -22,9 +22,10 @@ from __future__ import annotations
 import numpy as np
 
 from offroad_path.config import WorldConfig
+from offroad_path.geometry.exact import matmul, rigid_inverse
 from offroad_path.world.classes import DIRT, GRASS, PAVED, WATER
 from offroad_path.world.groups import OLD_LOOK
-from offroad_path.world.kernels import matmul, rigid_inverse, sample_bilinear
+from offroad_path.world.kernels import sample_bilinear
 from offroad_path.world.scene import World
 from offroad_path.world.trajectory import ARC_STEP_M
 

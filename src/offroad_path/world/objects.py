@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from offroad_path.world.kernels import dot_rows, norm_rows
+from offroad_path.geometry.exact import dot_rows, norm_rows
 
 NEAR_M = 0.05
 SPHERE, CYLINDER, BOX = 0, 1, 2

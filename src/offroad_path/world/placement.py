@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from offroad_path.config import WorldConfig
+from offroad_path.geometry.exact import norm_rows
 from offroad_path.world.classes import BASE_COLORS, FOLIAGE, OBSTACLE, TREE, TRUNK_COLOR
-from offroad_path.world.kernels import norm_rows
 from offroad_path.world.objects import Objects
 from offroad_path.world.terrain import Terrain, polyline_mask
 from offroad_path.world.trajectory import ARC_STEP_M, Curve

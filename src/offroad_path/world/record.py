@@ -15,6 +15,7 @@ from omegaconf import OmegaConf
 
 from offroad_path import __version__
 from offroad_path.config import WorldConfig
+from offroad_path.geometry.exact import matmul, rigid_inverse
 from offroad_path.geometry.path import path_length
 from offroad_path.sequence import meta as meta_keys
 from offroad_path.sequence.calibration import StereoCalibration
@@ -24,7 +25,6 @@ from offroad_path.utils.media import write_image
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.conditions import conditions_csv, frame_conditions
-from offroad_path.world.kernels import matmul, rigid_inverse
 from offroad_path.world.render import PinholeCamera, render_view
 from offroad_path.world.scene import World, build_world
 

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.geometry.exact import dot_rows, matmul, norm_rows
 from offroad_path.world.classes import SKY, TEXTURE_CONTRAST, WATER
-from offroad_path.world.kernels import dot_rows, matmul, norm_rows, sample_bilinear
+from offroad_path.world.kernels import sample_bilinear
 from offroad_path.world.objects import intersect
 from offroad_path.world.scene import World
 from offroad_path.world.sensor import expose, record

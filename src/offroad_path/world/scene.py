@@ -12,11 +12,12 @@ import cv2
 import numpy as np
 
 from offroad_path.config import WorldConfig
+from offroad_path.geometry.exact import matmul, norm_rows
 from offroad_path.world.appearance import LIGHTS, TRACKS, Appearance, appearance_rng, draw_appearance, rut_colour
 from offroad_path.world.appearance import palette as look_palette
 from offroad_path.world.classes import BASE_COLORS, DIRT, GRASS, PAVED, TEXTURE_CONTRAST, WATER
 from offroad_path.world.dressing import add_undergrowth, reshape_vegetation, rut_map
-from offroad_path.world.kernels import gaussian_blur, matmul, norm_rows, resize_cubic
+from offroad_path.world.kernels import gaussian_blur, resize_cubic
 from offroad_path.world.objects import Objects
 from offroad_path.world.placement import Placement, place_objects
 from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip

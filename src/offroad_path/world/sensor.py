@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from offroad_path.geometry.exact import matmul
 from offroad_path.world.appearance import Sensor
-from offroad_path.world.kernels import matmul, sample_bilinear
+from offroad_path.world.kernels import sample_bilinear
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # linear light's luminance
 BLUR_SAMPLES = 4

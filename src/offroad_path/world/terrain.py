@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offroad_path.world.kernels import norm_rows, resize_cubic, sample_bilinear
+from offroad_path.geometry.exact import norm_rows
+from offroad_path.world.kernels import resize_cubic, sample_bilinear
 
 
 @dataclass

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offroad_path.world.kernels import norm_rows
+from offroad_path.geometry.exact import norm_rows
 from offroad_path.world.terrain import Terrain
 
 ARC_STEP_M = 0.05
