@@ -1,4 +1,4 @@
-"""Issue 44: each world's look drawn from a stream of its own, and the sensor between light and bytes."""
+"""Each world's look drawn from a stream of its own, and the sensor between light and bytes."""
 
 from __future__ import annotations
 

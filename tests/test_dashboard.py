@@ -1,4 +1,4 @@
-"""The MLflow dashboard as a user opens it (issue 42): the experiment is a model-training one, each
+"""The MLflow dashboard as a user opens it: the experiment is a model-training one, each
 training run is named with its seed, and the stages of one `dvc repro` are children of one parent
 run. Real SQLite stores and a real DVC repo."""
 

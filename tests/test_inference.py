@@ -84,7 +84,7 @@ def test_predict_on_a_sequence_with_post_processing_writes_a_video(compose_confi
                                     seq.calibration.fx, seq.calibration.baseline_m)  # fmt: skip
     np.testing.assert_array_equal(frame.depth, expected)
     assert (frame.depth > 0).mean() > 0.5
-    # One camera (issue 45): the same sequence without its right images is predicted without the depth mask.
+    # One camera: the same sequence without its right images is predicted without the depth mask.
     shutil.rmtree(sequence / "image_r")
     assert next(open_source(sequence, compose_config().label.disparity).frames).depth is None
     mono = predict(compose_config, sequence, tmp_path / "mono", f"predict.checkpoint={trained[0]}", "predict.postprocess=true")

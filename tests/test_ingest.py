@@ -162,7 +162,7 @@ def test_two_videos_with_an_unknown_offset(compose_config, drive, rig, frames, i
 
 @pytest.mark.parametrize("kind", ["mcap", "sqlite3"])
 def test_a_bag_of_one_camera_and_tf_becomes_a_mono_sequence_that_labels(compose_config, drive, rig, frames, footprint, kind, tmp_path):
-    """ingest.mono (issue 45): the left camera alone (no right images in the bag) with its poses on
+    """ingest.mono: the left camera alone (no right images in the bag) with its poses on
     /tf; the sequence is the render seen through one undistorted pinhole camera, its poses the
     render's, and the label stage labels it from them."""
     from offroad_path.recordings.rectify import Undistorter

@@ -80,7 +80,7 @@ def test_a_folder_without_label_runs_is_refused_in_one_line(tmp_path, capsys):
 
 
 def test_a_mono_label_run_is_inspected_without_point_clouds(compose_config, drive, tmp_path):
-    """One camera (issue 45): image, label and footprint per label, the recorded poses; no stereo point
+    """One camera: image, label and footprint per label, the recorded poses; no stereo point
     cloud and no footprint check, which need disparity."""
     from offroad_path.label import label
 

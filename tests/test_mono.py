@@ -1,4 +1,4 @@
-"""Recordings of one camera (issue 45): a folder without right images is a mono sequence, labelled
+"""Recordings of one camera: a folder without right images is a mono sequence, labelled
 from its poses exactly as a stereo one with occlusion off; what needs stereo refuses it in one line."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The README's own-data recipe, run as written (its code block, read from README.md) on a real MCAP
 bag of the test drive, in a copy of the checkout holding the committed metrics: every stage works
-and nothing is written into the checkout's data/ or metrics/ (issue 42: the recipe as written
+and nothing is written into the checkout's data/ or metrics/ (the recipe as written once
 replaced the committed results, then failed on evaluate)."""
 
 from __future__ import annotations

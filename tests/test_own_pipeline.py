@@ -1,4 +1,4 @@
-"""The own pipeline (own/dvc.yaml, experiment=own; issue 45), as DVC resolves it from this checkout:
+"""The own pipeline (own/dvc.yaml, experiment=own), as DVC resolves it from this checkout:
 label -> split -> train -> postprocess -> evaluate, each stage's declared outputs where its config
 writes, its world network among the train stage's deps."""
 

@@ -10,13 +10,12 @@ import shutil
 import subprocess
 import sys
 import uuid
-import zlib
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from helpers import label_cfg, refused, snapshot, tagged_processes
+from helpers import label_cfg, png_declaring, refused, snapshot, tagged_processes
 
 from offroad_path.label import label
 from offroad_path.postprocess import run_postprocess
@@ -136,18 +135,6 @@ def test_a_recording_that_gives_no_label_says_why_and_writes_nothing(compose_con
     damage(recordings)
     write_text_atomic(tmp_path / "m.json", '{"labels": 374}\n', "label")  # the last good run's metrics stay
     refused(label, label_cfg(compose_config, recordings, tmp_path), capsys, tmp_path, recordings, "no label could be made", says)
-
-
-def png_declaring(path: Path, width: int, height: int) -> Path:
-    """A small, valid PNG header and IDAT that declares width x height pixels: a decompression bomb."""
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
-
-    header = width.to_bytes(4, "big") + height.to_bytes(4, "big") + bytes([8, 2, 0, 0, 0])
-    rows = zlib.compress(b"\x00" * (1 + 3 * width) * 64, 9)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", rows) + chunk(b"IEND", b""))
-    return path
 
 
 def test_predict_refuses_a_decompression_bomb_from_its_header(compose_config, trained, frames_folder, tmp_path, capsys):

@@ -14,9 +14,8 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import refused
+from helpers import png_declaring, refused
 from raw_rig import RosMessages, write_bag
-from test_robustness_inputs import png_declaring
 
 from offroad_path.errors import InputError
 from offroad_path.ingest import ingest

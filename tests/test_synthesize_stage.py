@@ -113,7 +113,7 @@ def test_a_stopped_stage_leaves_no_temporary_output(tmp_path):
 @pytest.mark.skipif(platform.machine() != "x86_64", reason="the kernel sets named are x86-64's")
 @pytest.mark.slow(seconds=30)
 def test_the_world_renders_the_same_bytes_on_every_cpu_kernel_set(tmp_path):
-    """Issue 42: the world rendered on an AVX2 and an AVX-512 machine differed (OpenBLAS's Haswell and
+    """The world rendered on an AVX2 and an AVX-512 machine differed (OpenBLAS's Haswell and
     SkylakeX kernels in the renderer's matrix products); NumPy's and OpenCV's dispatch never did."""
 
     def render(name: str, env: dict[str, str]) -> dict[str, str]:

@@ -57,7 +57,7 @@ UNET_MODULES = {"down.0", "down.1", "down.2", "down.3", "bottom", "up.0", "up.1"
 
 
 def test_fine_tuning_from_the_world_loads_every_layer_of_the_path_network(compose_config, trained, tiny_config, tmp_path):
-    """pretraining=world (issue 45): a train-stage checkpoint of the same architecture gives every
+    """pretraining=world: a train-stage checkpoint of the same architecture gives every
     layer, the classifier's weight and bias included, and nothing is left at random."""
     checkpoint = trained[0]
     saved = {k.removeprefix("model."): v for k, v in torch.load(checkpoint, weights_only=True)["state_dict"].items()}

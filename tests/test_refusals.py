@@ -1,6 +1,7 @@
-"""Issue 42's hostile cases, one test each: every one failed on c478ee7 (a replaced output, a
-traceback, a silent success). Each case exits 2 with one line naming the file or key and leaves
-the test's folder as it was (helpers.refused), unless it says otherwise."""
+"""Refusals across the stages, one case a test: launcher rank variables, label shards, settings
+without meaning, loggers' folders, empty splits, untrained seeds, a full disk, short videos, inspect's
+arguments, decompression bombs, a bag's stereo pair. Each case exits 2 with one line naming the file
+or key and leaves the test's folder as it was (helpers.refused), unless it says otherwise."""
 
 from __future__ import annotations
 
@@ -14,8 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import label_cfg, refused, snapshot, user_folder
-from test_robustness_inputs import png_declaring
+from helpers import label_cfg, png_declaring, refused, snapshot, user_folder
 
 from offroad_path.config import load_config, validate_config
 from offroad_path.evaluate import evaluate
