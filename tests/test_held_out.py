@@ -37,7 +37,7 @@ def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config
 def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case(compose_config):
     c = compose_config(
         "synthesize.test_worlds.min_blocks=3", "synthesize.test_worlds.per_stress=1",
-        "synthesize.test_worlds.stress_sets=[dappled,held_out_look,outside_look]",
+        "synthesize.test_worlds.stress_sets=[held_out_look,outside_look]",
     ).synthesize.test_worlds  # fmt: skip
     cfg = compose_config().world
     chosen = choose_held_out_worlds(cfg, c, master_seed=0, workers=2)
@@ -46,12 +46,12 @@ def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case
     assert [w.index for w in main] == list(range(len(main))) and sum(w.blocks for w in main[:-1]) < 3 <= sum(w.blocks for w in main)
     assert all(w.seed == held_out_seed(0, w.index) and w.draw == "training" and w.name == f"test_{w.index:03d}" for w in main)
     stress = {w.test_set: w for w in chosen if w.test_set != "main"}
-    assert list(stress) == ["dappled", "held_out_look", "outside_look"]
+    assert list(stress) == ["held_out_look", "outside_look"]
     for name, world in stress.items():
         assert name in world.groups and world.seed == stress_seed(0, name, world.index) and world.name == f"stress_{name}_{world.index:03d}"
-    assert [stress[k].draw for k in stress] == ["training", "held_out", "full_variety"]
-    # every look a main or training-drawn world shows is of the training distribution
-    for world in [*main, stress["dappled"]]:
+    assert [stress[k].draw for k in stress] == ["held_out", "full_variety"]
+    # every look a main world shows is of the training distribution
+    for world in main:
         look = build_world(cfg, world.seed, world.draw).look
         assert look.track not in ("grass_track", "none") and look.light != "hazy" and not look.outside
 
