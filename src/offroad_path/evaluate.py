@@ -79,13 +79,14 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
     bootstrap = test_bootstrap(evaluate_cfg, test.samples, cfg.split.block_m)
     uncertainty, steering = Uncertainty(bootstrap, cfg.split.block_m), SteeringFromPaths(evaluate_cfg, bootstrap)
     # The report, section by section, in the order of results.md and metrics.json.
+    by_condition = ByCondition(bootstrap)
     sections: list[Section] = [
         results,
         uncertainty,
-        Baselines(),
+        Baselines(by_condition),
         steering,
         PrimaryQuestions(evaluate_cfg, uncertainty, steering),
-        ByCondition(bootstrap),
+        by_condition,
         stress,
         Temporal(evaluate_cfg, cfg.label, cfg.split.block_m),
         RealFootage(evaluate_cfg, bootstrap, cfg.split.block_m, cfg.label.distance_m),

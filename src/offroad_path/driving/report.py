@@ -157,25 +157,40 @@ def primary(logs: dict[str, list[DriveLog]], name: str, key: str, conclusions) -
     return entry
 
 
-def table(scores: list[PolicyScore]) -> str:
-    """A markdown table, one row per policy."""
+def _interval(entry: dict) -> Interval:
+    return Interval(entry["value"], entry["low"], entry["high"])
+
+
+def table(policies: dict[str, dict]) -> str:
+    """A markdown table, one row per policy, from each policy's metrics (PolicyScore.as_dict)."""
     rows = [
         "| policy | driven (m) | interventions | per km of route [95 % CI] | autonomy % [95 % CI] | mean offset (m) [95 % CI] | "
         "95th pct offset (m) [95 % CI] | water entries per km | steps without a path |",
         "|" + " --- |" * 9,
     ]
-    for p in scores:
+    for name, p in policies.items():
         rows.append(
-            f"| {p.policy} | {p.distance_m:.0f} | {p.interventions} | {p.per_km.text(1)} | {p.autonomy_pct.text(1)} | "
-            f"{p.mean_offset_m.text(2)} | {p.p95_offset_m.text(2)} | {p.water_per_km:.1f} | {p.no_path_steps} |"
+            f"| {name} | {p['distance_m']:.0f} | {p['interventions']} | {_interval(p['interventions_per_km']).text(1)} | "
+            f"{_interval(p['autonomy_pct']).text(1)} | {_interval(p['mean_offset_m']).text(2)} | {_interval(p['p95_offset_m']).text(2)} | "
+            f"{p['water_entries_per_km']:.1f} | {p['no_path_steps']} |"
         )
     return "\n".join(rows)
 
 
-def comparison_table(comparisons: dict[tuple[str, str], Interval]) -> str:
+def comparison_table(differences: dict[str, dict]) -> str:
+    """Path minus end to end per pair ("a - b" -> value, low, high: the metrics' path_minus_end_to_end)."""
     rows = ["| path policy | end to end | interventions per km, path - end to end [95 % CI] |", "| --- | --- | --- |"]
-    rows += [f"| {a} | {b} | {i.difference_text(2)} |" for (a, b), i in comparisons.items()]
+    rows += [f"| {pair.replace(' - ', ' | ', 1)} | {_interval(i).difference_text(2)} |" for pair, i in differences.items()]
     return "\n".join(rows)
+
+
+def argument_markdown(argument: str, entry: dict, heading: str = "##") -> str:
+    """One argument's section from its metrics (drive.json's entry): the drive stage's results.md and
+    docs/results.md render it with this, and only this."""
+    return (
+        f"\n{heading} {ARGUMENTS[argument]}\n\n{table(entry['policies'])}\n\n{comparison_table(entry['path_minus_end_to_end'])}"
+        f"\n\nExploratory: {entry['finding']}\n"
+    )
 
 
 def finding(comparisons: dict[tuple[str, str], Interval]) -> str:
@@ -218,7 +233,7 @@ def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str], con
             },
             "finding": sentence,
         }
-        sections.append(f"\n## {ARGUMENTS[argument]}\n\n{table(scores)}\n\n{comparison_table(comparisons)}\n\nExploratory: {sentence}\n")
+        sections.append(argument_markdown(argument, metrics[argument]))
         for name, (section, key) in mine.items():
             a, _, b = key.partition("_vs_")
             if section == argument and a in by_policy and b in by_policy:

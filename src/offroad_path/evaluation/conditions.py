@@ -14,7 +14,6 @@ import numpy as np
 
 from offroad_path.data.manifest import Sample, parse_boolean
 from offroad_path.evaluation.metrics import pooled
-from offroad_path.evaluation.tables import fmt
 from offroad_path.statistics.bootstrap import Interval
 from offroad_path.statistics.scores import iou as iou_score
 from offroad_path.world.groups import GROUPS, OLD_LOOK
@@ -68,25 +67,12 @@ def _read_table(path: Path) -> list[dict]:
 class ConditionTable:
     """Pooled IoU per condition (rows) and per method (columns)."""
 
-    keys: list[str]
-    titles: list[str]
+    keys: list[str]  # the condition groups (world.groups.GROUPS)
     frames: list[int]  # test images in each group
     iou: dict[str, list[float]]  # method -> IoU per condition (nan for an empty group)
     sequences: list[int] = field(default_factory=list)  # test sequences each group's frames come from
     intervals: dict[str, list[Interval | None]] = field(default_factory=dict)  # method -> per condition; None: < 2 blocks
     minus_baseline: dict[str, list[Interval | None]] = field(default_factory=dict)  # method -> its IoU minus the baseline's, paired
-
-    def _cell(self, method: str, i: int) -> str:
-        found = self.intervals.get(method, [None] * len(self.keys))[i]
-        return found.text() if found is not None else fmt(self.iou[method][i])
-
-    def markdown(self) -> str:
-        methods = list(self.iou)
-        lines = ["| condition | test images | test sequences | " + " | ".join(methods) + " |", "|" + " --- |" * (3 + len(methods))]
-        for i, title in enumerate(self.titles):
-            cells = " | ".join(self._cell(m, i) for m in methods)
-            lines.append(f"| {title} | {self.frames[i]} | {self.sequences[i] if self.sequences else ''} | {cells} |")
-        return "\n".join(lines) + "\n"
 
     def metrics(self, method_keys: dict[str, str]) -> dict:
         """{condition key: {'frames': n, 'sequences': n, <method key>: IoU or None, <method key>.interval: [low, high]}}."""
@@ -119,7 +105,7 @@ def by_condition(
         m: [pooled(counts[..., mask, :].reshape(-1, 4)).iou if mask.any() else float("nan") for mask in masks]
         for m, counts in per_image.items()
     }
-    table = ConditionTable([k for k, _, _ in GROUPS], [t for _, t, _ in GROUPS], [int(m.sum()) for m in masks], iou)
+    table = ConditionTable([k for k, _, _ in GROUPS], [int(m.sum()) for m in masks], iou)
     if sequences is not None:
         table.sequences = [len({s for s, keep in zip(sequences, mask, strict=True) if keep}) for mask in masks]
     if bootstrap is not None:
