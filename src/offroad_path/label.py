@@ -23,13 +23,12 @@ import shutil
 from contextlib import nullcontext
 from pathlib import Path
 
-import cv2
 import numpy as np
 from omegaconf import DictConfig
 
 from offroad_path.geometry.exact import pinned_blas
 from offroad_path.labelling import shards
-from offroad_path.labelling.labeller import check_inputs, label_sequence
+from offroad_path.labelling.labeller import check_inputs, label_job
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.sequence.reader import find_sequences, open_sequence, sequence_names
 from offroad_path.stage import hydra_stage, reads
@@ -40,15 +39,6 @@ from offroad_path.utils.rules import ConfigValueError
 from offroad_path.utils.tracking import stage_run
 
 log = logging.getLogger("offroad_path.label")
-
-
-def _label_job(args: tuple[str, str, DictConfig]) -> dict:
-    cv2.setNumThreads(1)
-    # OpenCV's kernels chosen by CPU (AVX2, AVX-512, IPP's) round differently from its baseline ones
-    # (SSE2/SSE3, on every x86-64 CPU): the corners, tracks and PnP, and so the labels, moved with them.
-    cv2.setUseOptimized(False)
-    root, out_dir, cfg = args
-    return label_sequence(open_sequence(root), cfg, Path(out_dir))
 
 
 def drift_metrics(drifts: list[dict]) -> dict[str, float]:
@@ -146,7 +136,7 @@ def label(cfg: DictConfig) -> dict:
         else:
             jobs = [(str(root), str(tmp / name), cfg.label) for root, name in zip(roots, names, strict=True)]
             # in workers whose OpenBLAS (NumPy's and OpenCV's) takes the same kernels on every CPU: the same labels
-            summaries = map_processes(_label_job, jobs, cfg.label.workers, [str(root) for root in roots], "label", env=pinned_blas())
+            summaries = map_processes(label_job, jobs, cfg.label.workers, [str(root) for root in roots], "label", env=pinned_blas())
         metrics = run_metrics(summaries, in_dir, need_labels=not sharded(cfg))
         if metrics.get("one_camera_sequences"):
             log.warning(

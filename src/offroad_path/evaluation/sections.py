@@ -175,7 +175,11 @@ def baselines_markdown(m: dict, heading: str = "\n## Baselines\n\n") -> str:
         else ""
     )
     prior = b["mean_path_prior"]
-    rows = [BaselineRow(baseline_name(key), v["accuracy"], v["recall"], v["precision"], v["iou"]) for key, v in b.items()]
+    undefined = float("nan")  # metrics.json's None: a score without a value (n/a in the table)
+    rows = [
+        BaselineRow(baseline_name(key), *(undefined if v[k] is None else v[k] for k in ("accuracy", "recall", "precision", "iou")))
+        for key, v in b.items()
+    ]
     return (
         f"{heading}What a model must beat, on the same test set: the mean path prior (the average training label, thresholded, "
         f"on every image) scores accuracy {prior['accuracy']:.3f} and IoU {prior['iou']:.3f}; each network's outputs against "

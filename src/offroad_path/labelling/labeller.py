@@ -10,7 +10,9 @@ from collections import Counter
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+import cv2
 import numpy as np
+from omegaconf import DictConfig
 
 from offroad_path.config import OdometryConfig
 from offroad_path.errors import InputError
@@ -21,7 +23,7 @@ from offroad_path.labelling.frame_selection import select_segments
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
 from offroad_path.sequence.poses import max_steps, poses_to_text, read_poses
-from offroad_path.sequence.reader import Sequence
+from offroad_path.sequence.reader import Sequence, open_sequence
 from offroad_path.utils.media import write_image
 
 log = logging.getLogger(__name__)
@@ -213,3 +215,14 @@ def _write_csv(path: Path, rows: list[dict], fieldnames: list[str]) -> None:
         writer = csv.DictWriter(f, fieldnames=fieldnames)
         writer.writeheader()
         writer.writerows(rows)
+
+
+def label_job(args: tuple[str, str, DictConfig]) -> dict:
+    """One sequence labelled in a worker of the label stage ((its folder, the output folder, the
+    config)); a module's function, so that it pickles by name under any launcher."""
+    cv2.setNumThreads(1)
+    # OpenCV's kernels chosen by CPU (AVX2, AVX-512, IPP's) round differently from its baseline ones
+    # (SSE2/SSE3, on every x86-64 CPU): the corners, tracks and PnP, and so the labels, moved with them.
+    cv2.setUseOptimized(False)
+    root, out_dir, cfg = args
+    return label_sequence(open_sequence(root), cfg, Path(out_dir))
