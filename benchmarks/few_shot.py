@@ -130,9 +130,9 @@ def predict(checkpoints: list[Path], images: list[np.ndarray]) -> np.ndarray:
 
 def curve(args) -> dict:
     from offroad_path.config import load_config
-    from offroad_path.statistics.bootstrap import Resampling, block_sums, paired_interval
     from offroad_path.evaluation.metrics import counts
     from offroad_path.evaluation.real import real_row
+    from offroad_path.statistics.bootstrap import Resampling, block_sums, paired_interval
     from offroad_path.statistics.scores import iou
 
     cfg = load_config()

@@ -34,14 +34,14 @@ import numpy as np
 
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import read_manifest
-from offroad_path.statistics.bootstrap import Resampling
 from offroad_path.evaluation.metrics import counts, pooled
-from offroad_path.statistics.scores import iou
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
 from offroad_path.odometry.perturb import PoseError, drifted_poses, erroneous_poses
 from offroad_path.odometry.trajectory import drift
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import find_sequences, open_sequence
+from offroad_path.statistics.bootstrap import Resampling
+from offroad_path.statistics.scores import iou
 
 sys.path.insert(0, str(Path(__file__).parent))
 from seed_spread import key, test_counts

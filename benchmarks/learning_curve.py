@@ -90,12 +90,12 @@ def test_counts(manifest: Path, test: list, labels: np.ndarray) -> np.ndarray:
 def curve(args: argparse.Namespace) -> dict:
     from offroad_path.config import load_config
     from offroad_path.data.loading import load_labels
-    from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.evaluation.metrics import counts, mean_path, pooled
     from offroad_path.evaluation.report import sample_test_sets
-    from offroad_path.statistics.scores import iou
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
     from offroad_path.sequence.meta import MAIN
+    from offroad_path.statistics.bootstrap import Resampling
+    from offroad_path.statistics.scores import iou
 
     cfg = load_config()
     split = read_split(args.data / "split")

@@ -83,9 +83,9 @@ def main() -> None:
     from offroad_path.config import load_config
     from offroad_path.data.loading import load_labels
     from offroad_path.data.manifest import read_manifest
-    from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.evaluation.metrics import mean_path
     from offroad_path.evaluation.real import RealFrames, score_real
+    from offroad_path.statistics.bootstrap import Resampling
 
     cfg = load_config()
     e = cfg.evaluate
