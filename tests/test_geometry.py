@@ -37,3 +37,22 @@ def test_overlay_blends_the_path_toward_green_and_leaves_the_rest():
     assert red > 200 and green > 200 and blue < 40 and OUTLINE == (255, 255, 0)
     assert (outlined[10, 15] == [50, 178, 50]).all()
     assert (outlined[0, 0] == 100).all()
+
+
+def test_the_blas_free_solve_and_power_agree_with_numpys():
+    """geometry.exact.solve and power (the odometry's, without BLAS) against LAPACK's and matrix_power."""
+    from offroad_path.geometry.exact import power, solve
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(6, 6)) + 6 * np.eye(6)
+    b = rng.normal(size=6)
+    np.testing.assert_allclose(solve(a, b), np.linalg.solve(a, b), rtol=1e-12, atol=1e-12)
+    swapped = np.array([[0.0, 2.0], [3.0, 1.0]])  # a zero pivot: the rows must be exchanged
+    np.testing.assert_allclose(solve(swapped, np.array([4.0, 5.0])), [1.0, 2.0])
+    with pytest.raises(np.linalg.LinAlgError):
+        solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.array([1.0, 1.0]))
+    t = np.eye(4)
+    t[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    t[:3, 3] = [1.0, 2.0, 0.5]
+    np.testing.assert_allclose(power(t, 5), np.linalg.matrix_power(t, 5), atol=1e-12)
+    np.testing.assert_array_equal(power(t, 0), np.eye(4))
