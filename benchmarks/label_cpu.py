@@ -37,7 +37,7 @@ def main() -> None:
 
     from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
-    avx512 = " ".join(f for f in __cpu_dispatch__ if "AVX512" in f and __cpu_features__.get(f))  # dispatched here: may be turned off
+    avx512 = " ".join(f for f in __cpu_dispatch__ if ("AVX512" in f or f == "X86_V4") and __cpu_features__.get(f))  # dispatched here
     envs = [("again", {}), ("scalar", without_vector_kernels()), *((c, {"OPENBLAS_CORETYPE": c}) for c in openblas_cores()),
             ("OPENCV_IPP=sse42", {"OPENCV_IPP": "sse42"}), ("OPENCV_IPP=disabled", {"OPENCV_IPP": "disabled"}),
             ("OpenCV without AVX-512", {"OPENCV_CPU_DISABLE": "AVX512-SKX"}),
