@@ -11,7 +11,8 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from offroad_path.evaluation.readme import PRIMARIES_HEAD, main, misstated
+from offroad_path.evaluation.readme import main
+from offroad_path.evaluation.rendering import PRIMARIES_HEAD, misstated
 from offroad_path.statistics.counts import compare_rates, power, route_needed
 from offroad_path.statistics.primaries import holm_levels, verdicts
 

@@ -205,7 +205,7 @@ def test_outputs_follow_the_contract(scored, tmp_path):
         "mean_path_prior",
         "colour_classifier",
     }
-    assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 | 1.000 |" in (tmp_path / "evaluation" / "results.md").read_text()
+    assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 [1.000, 1.000] |" in (tmp_path / "evaluation" / "results.md").read_text()
     assert len((tmp_path / "evaluation" / "results.csv").read_text().splitlines()) == 5
     curve = np.loadtxt(tmp_path / "pr" / "unet-none.csv", delimiter=",", skiprows=1)
     assert curve.shape == (101, 3) and np.allclose(curve[1:-1, 1:], 1.0)  # perfect at every threshold inside (0, 1)

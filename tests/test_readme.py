@@ -57,7 +57,7 @@ def test_the_block_needs_both_markers():
 
 
 def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
-    from offroad_path.evaluation.readme import _steering
+    from offroad_path.evaluation.summary import _steering
 
     row = {"mae": 0.1}
     evaluation = {"steering_from_paths": {"straight_ahead": {"mae": 0.21}, "pilotnet": row, "label_ceiling": {"mae": 0.07}}}

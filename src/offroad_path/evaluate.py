@@ -75,9 +75,9 @@ def evaluate(cfg: DictConfig) -> list[ResultRow]:
     test = every.subset(every.main)  # the main test set: every figure but the stress sets'
     stress = StressSets(lambda samples: test_bootstrap(evaluate_cfg, samples, cfg.split.block_m))
     stress.score(every)
-    results = ResultsTable()
     bootstrap = test_bootstrap(evaluate_cfg, test.samples, cfg.split.block_m)
     uncertainty, steering = Uncertainty(bootstrap, cfg.split.block_m), SteeringFromPaths(evaluate_cfg, bootstrap)
+    results = ResultsTable(uncertainty)
     # The report, section by section, in the order of results.md and metrics.json.
     by_condition = ByCondition(bootstrap)
     sections: list[Section] = [

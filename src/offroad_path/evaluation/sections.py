@@ -16,13 +16,17 @@ from offroad_path.evaluation.conditions import ConditionTable, by_condition, rea
 from offroad_path.evaluation.figures import before_and_after, good_and_bad_cases
 from offroad_path.evaluation.metrics import Scores, non_corresponding, per_image_iou, pooled
 from offroad_path.evaluation.real import RealFrames, RealRow, Separability, score_real, separability
+from offroad_path.evaluation.rendering import (
+    against_pilotnet_markdown,
+    baselines_markdown,
+    conditions_markdown,
+    results_table_markdown,
+    temporal_markdown,
+)
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
 from offroad_path.evaluation.tables import (
-    BaselineRow,
     ResultRow,
-    baseline_name,
-    fmt,
     markdown_table,
     method_title,
     network_name,
@@ -32,7 +36,6 @@ from offroad_path.evaluation.temporal import TemporalRow, score_temporal
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, Uncertainty
 from offroad_path.statistics.bootstrap import Draws, Interval, mean
 from offroad_path.statistics.primaries import from_draws, owned
-from offroad_path.world.groups import GROUPS
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +54,8 @@ class ResultsTable:
     """Every run, raw and post-processed, pooled over the test set (the paper's Table 5.1), and the
     figures that pick from it (good and bad cases, before and after post-processing)."""
 
-    def __init__(self) -> None:
+    def __init__(self, uncertainty: Uncertainty | None = None) -> None:
+        self.uncertainty = uncertainty  # its intervals go in the table (None: the pooled figures alone)
         self.runs: list[str] = []
         self.rows: dict[tuple[str, str], ResultRow] = {}
         self.per_image_iou: dict[tuple[str, str], np.ndarray] = {}
@@ -75,17 +79,14 @@ class ResultsTable:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
 
     def markdown(self) -> str:
-        return (
-            "# Results (Table 5.1 layout)\n\nPooled over the test set: accuracy, recall, precision, IoU. "
-            "The last column is the mean of per-image IoU, not the paper's measure."
-            + (
-                f" {self.without_depth} of {self.images} test images come from "
-                "a recording of one camera: post-processed without the depth mask (it needs stereo disparity)."
-                if self.without_depth
-                else ""
-            )
-            + "\n\n"
-            + markdown_table(self.table())
+        one_camera = (
+            f"{self.without_depth} of {self.images} test images come from a recording of one camera: post-processed without "
+            "the depth mask (it needs stereo disparity).\n\n"
+            if self.without_depth
+            else ""
+        )
+        return results_table_markdown(
+            self.metrics() | (self.uncertainty.metrics() if self.uncertainty else {}), heading="# Results\n\n" + one_camera
         )
 
     def metrics(self) -> dict:
@@ -151,43 +152,6 @@ class Baselines:
         return {"baselines": {name: numbers(s) for name, s in self.scores.items()}}
 
 
-def baselines_markdown(m: dict, heading: str = "\n## Baselines\n\n") -> str:
-    """The baselines from the report's metrics ("baselines", and "by_condition"'s main-set row for each
-    network minus the prior): results.md's section and the README's, in one wording."""
-    b = m["baselines"]
-    others = [v["iou"] for k, v in b.items() if k.startswith("non_corresponding.") and v.get("iou") is not None]
-    spread = f" score IoU {min(others):.3f} to {max(others):.3f}" if others else " cannot be scored"
-    colour = b.get("colour_classifier")
-    colour_text = (
-        f" A per-pixel classifier on colour and image position alone (gradient-boosted trees on RGB, HSV, row and column, "
-        f"trained on the training split) scores accuracy {colour['accuracy']:.3f} and IoU {colour['iou']:.3f}: what a network "
-        "scores above it needs context, the track's shape and where it leads."
-        if colour and colour.get("iou") is not None
-        else ""
-    )
-    everything = m.get("by_condition", {}).get("all", {})
-    margins = [(key.removesuffix(".minus_prior"), value) for key, value in everything.items() if key.endswith(".minus_prior")]
-    margin_text = (
-        " Each network minus the prior on the main test set (raw maps, seeds pooled, paired hierarchical interval): "
-        + "; ".join(f"{method_title(run)} {Interval(*g).difference_text()}" for run, g in margins if run != "colour_classifier")
-        + "."
-        if margins
-        else ""
-    )
-    prior = b["mean_path_prior"]
-    undefined = float("nan")  # metrics.json's None: a score without a value (n/a in the table)
-    rows = [
-        BaselineRow(baseline_name(key), *(undefined if v[k] is None else v[k] for k in ("accuracy", "recall", "precision", "iou")))
-        for key, v in b.items()
-    ]
-    return (
-        f"{heading}What a model must beat, on the same test set: the mean path prior (the average training label, thresholded, "
-        f"on every image) scores accuracy {prior['accuracy']:.3f} and IoU {prior['iou']:.3f}; each network's outputs against "
-        f"every *other* test frame's ground truth (the paper's non-corresponding baseline; paper: accuracy 0.84, IoU 0.41)"
-        f"{spread}.{colour_text}{margin_text}\n\n" + markdown_table(rows)
-    )
-
-
 class SteeringFromPaths:
     """A steering angle from each run's thresholded path (pure pursuit), against PilotNet's and the
     label's (empty without steering ground truth)."""
@@ -226,15 +190,11 @@ class SteeringFromPaths:
     def _against_pilotnet(self) -> str:
         if not self.against_pilotnet:
             return ""
-        lines = [
+        return (
             "\nPaired hierarchical-bootstrap intervals (worlds, blocks, training seeds; seed k of a network paired with seed k "
             "of PilotNet) of each path network's error minus PilotNet's, on the same frames, both pooled over their seeds; below "
-            "0: the path network steers closer to the true angle.\n",
-            "| method | MAE difference, path + pure pursuit - PilotNet [95 % interval] |",
-            "| --- | --- |",
-        ]
-        lines += [f"| {method_title(run)} | {i.difference_text()} |" for run, i in self.against_pilotnet.items()]
-        return "\n".join(lines) + "\n"
+            "0: the path network steers closer to the true angle.\n\n" + against_pilotnet_markdown(self.metrics()["steering_from_paths"])
+        )
 
     def metrics(self) -> dict:
         rows = self.comparison.rows
@@ -271,57 +231,6 @@ class ByCondition:
         return {"by_condition": self.table.metrics(self.keys)} if self.table is not None else {}
 
 
-BASELINE_TITLES = {"mean_path_prior": "mean path prior", "colour_classifier": "colour classifier"}
-
-
-def conditions_markdown(c: dict[str, dict], heading: str = "\n## Results by condition\n\n") -> str:
-    """IoU by condition from its metrics (condition -> frames, sequences, each method's IoU, interval and
-    margin over the prior), and the off-track group against the prior: results.md's and docs/results.md's."""
-    titles = {key: title for key, title, _ in GROUPS}
-    methods = [k for k in next(iter(c.values())) if k not in ("frames", "sequences") and "." not in k]
-    lines = [
-        f"{heading}Pooled IoU (raw maps) over the test frames of each group, from what the world knows about the next 20 m "
-        "of driving (conditions.csv of each sequence); a frame can be in several groups. The mean path prior shows how hard "
-        "a group is for a network that ignores the image. Each figure pools the method's training seeds, with its 95 % "
-        "hierarchical-bootstrap interval (the test worlds that hold the group's frames, their blocks, the seeds), and the "
-        "number of test sequences they come from; a group within one or two sequences says little. Exploratory: no "
-        "correction for multiplicity.\n",
-        "| condition | test images | test sequences | " + " | ".join(BASELINE_TITLES.get(m) or method_title(m) for m in methods) + " |",
-        "|" + " --- |" * (3 + len(methods)),
-    ]
-    for key, row in c.items():
-        cells = [_condition_cell(row, m) for m in methods]
-        lines.append(f"| {titles.get(key, key)} | {row['frames']} | {row.get('sequences', '')} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n" + _against_prior(c.get("off_track", {}), titles.get("off_track", "off_track"))
-
-
-def _condition_cell(row: dict, method: str) -> str:
-    """A method's IoU in one group, with its interval where the group's blocks allow one."""
-    iou = fmt(row[method]) if row.get(method) is not None else "n/a"
-    return iou + (" [{:.3f}, {:.3f}]".format(*row[f"{method}.interval"]) if f"{method}.interval" in row else "")
-
-
-def _against_prior(row: dict, title: str) -> str:
-    """One group's networks against the mean path prior, paired (exploratory): a direction only where the interval excludes 0."""
-    margins = {key.removesuffix(".minus_prior"): g for key, g in row.items() if key.endswith(".minus_prior")}
-    gaps = {run: g for run, g in margins.items() if run != "colour_classifier"}  # the networks
-    if not gaps or row.get("mean_path_prior") is None:
-        return ""
-    below = [run for run, (_, _, high) in gaps.items() if high < 0]
-    above = [run for run, (_, low, _) in gaps.items() if low > 0]
-    same = len(gaps) - len(below) - len(above)
-    ious = [row[run] for run in gaps]
-    verdict = f"{len(below)} of {len(gaps)} networks score below it and {len(above)} above it (paired intervals excluding 0)" + (
-        f"; no difference measured for {same}" if same else ""
-    )
-    spread = ", ".join(f"{method_title(run)} {g[0]:+.3f} [{g[1]:+.3f}, {g[2]:+.3f}]" for run, g in gaps.items())
-    return (
-        f"\nExploratory: {title}, {row['frames']} test images from {row.get('sequences', 'n/a')} sequences. The networks score "
-        f"IoU {min(ious):.3f} to {max(ious):.3f} against the mean path prior's {row['mean_path_prior']:.3f}; {verdict}. Network "
-        f"minus prior: {spread}.\n"
-    )
-
-
 class Temporal:
     """Every frame of the test blocks, with and without the temporal filter (evaluate.temporal)."""
 
@@ -339,26 +248,6 @@ class Temporal:
         if self.rows is None:
             return {}
         return {"temporal": {key: {"frames": row.frames, **numbers(row)} for key, row in self.rows.items()}}
-
-
-def temporal_markdown(t: dict[str, dict], alpha: float, heading: str = "\n## Temporal consistency\n\n") -> str:
-    """The temporal section from its metrics (run -> TemporalRow's numbers): results.md's and docs/results.md's."""
-    rows = [TemporalRow(method=method_title(run), **entry) for run, entry in t.items()]
-    gains = {run: row["iou_filtered"] - row["iou"] for run, row in t.items()}
-    lower = [run for run, row in t.items() if row.get("gain_high") is not None and row["gain_high"] < 0]
-    higher = [run for run, row in t.items() if row.get("gain_low") is not None and row["gain_low"] > 0]
-    return (
-        f"{heading}Every frame from the first to the last test frame of each block of driving, labelled exactly from the "
-        "world's true poses and depth (so IoU here is not the table's, which scores VO labels). Filtered: the previous fused "
-        "confidence carried into each frame by the VO pose and stereo depth, then averaged with the current prediction "
-        f"(weight {alpha:g} on the current). Stability: the mean IoU of each thresholded path with the previous one carried "
-        "into its frame by the true pose and depth. The filter's gain: a paired 95 % block-bootstrap interval of filtered "
-        "minus raw IoU (0 inside: no difference measured).\n\n"
-        + markdown_table(rows)
-        + f"\nThe temporal filter (exploratory) changes IoU by {min(gains.values()):+.3f} to {max(gains.values()):+.3f}: lower "
-        f"for {len(lower)} and higher for {len(higher)} of {len(gains)} networks by intervals excluding 0 (the first training "
-        "seed of each).\n"
-    )
 
 
 class RealFootage:

@@ -57,6 +57,23 @@ def method_title(run: str) -> str:
     return f"{network_name(model)} ({pretraining})"
 
 
+# The paper's central claim as one comparison: every run without pretraining above the mean-path prior, an
+# intersection-union test (Berger 1982): it rejects when each run's own comparison rejects, so it is
+# answered by the weakest of them (the largest p-value; one at or below the prior when there is such a run).
+EVERY_SCRATCH_VS_PRIOR = "every_scratch_run_vs_mean_path_prior"
+
+
+def comparison_title(key: str, weakest: str = "") -> str:
+    """A comparison's metrics key as its row title: 'unet-none_vs_fcn-none' -> 'U-Net (none) - FCN (none)'
+    (weakest: the run the intersection-union comparison rests on)."""
+    if key == EVERY_SCRATCH_VS_PRIOR:
+        return f"every network without pretraining - mean path prior (intersection-union: the weakest, {weakest or 'n/a'})"
+    if key.endswith("_postprocessed_vs_raw"):
+        return f"{method_title(key.removesuffix('_postprocessed_vs_raw'))}: post-processed - raw"
+    a, _, b = key.partition("_vs_")
+    return f"{method_title(a)} - {'mean path prior' if b == 'mean_path_prior' else method_title(b)}"
+
+
 def baseline_name(key: str) -> str:
     """'non_corresponding.unet-none' -> 'U-Net (none) against non-corresponding ground truth'."""
     if key.startswith("non_corresponding."):

@@ -20,8 +20,9 @@ from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
 from offroad_path.errors import InputError
 from offroad_path.evaluation.metrics import pooled
-from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
-from offroad_path.evaluation.tables import method_title, split_run_name
+from offroad_path.evaluation.rendering import comparisons_markdown
+from offroad_path.evaluation.report import PP_KEY, TestSet
+from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR, method_title, split_run_name
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.statistics.scores import SCORES, Score, iou
 
@@ -86,27 +87,18 @@ def test_bootstrap(e: DictConfig, samples: list[Sample], block_m: float) -> Hier
 
 Side = tuple[str, str]  # a run and its post-processing ("no" / "yes")
 PRIOR: Side = ("mean_path_prior", "no")
-# The paper's central claim as one comparison: every run without pretraining above the mean-path prior, an
-# intersection-union test (Berger 1982): it rejects when each run's own comparison rejects, so it is
-# answered by the weakest of them (the largest p-value; one at or below the prior when there is such a run).
-EVERY_SCRATCH_VS_PRIOR = "every_scratch_run_vs_mean_path_prior"
 
 
-def comparisons(runs: list[str]) -> list[tuple[str, str, Side, Side]]:
-    """(metrics key, title, a, b): the differences a - b the report states."""
-    pairs = []
+def comparisons(runs: list[str]) -> list[tuple[str, Side, Side]]:
+    """(metrics key, a, b): the differences a - b the report states (titled by tables.comparison_title)."""
     scratch = [r for r in runs if split_run_name(r)[1] == "none"]
-    for run in scratch:
-        pairs.append((f"{run}_vs_mean_path_prior", f"{method_title(run)} - mean path prior", (run, "no"), PRIOR))
-    for a, b in combinations(scratch, 2):
-        pairs.append((f"{a}_vs_{b}", f"{method_title(a)} - {method_title(b)}", (a, "no"), (b, "no")))
+    pairs = [(f"{run}_vs_mean_path_prior", (run, "no"), PRIOR) for run in scratch]
+    pairs += [(f"{a}_vs_{b}", (a, "no"), (b, "no")) for a, b in combinations(scratch, 2)]
     for run in runs:
         model, pretraining = split_run_name(run)
         if pretraining != "none" and f"{model}-none" in runs:
-            base = f"{model}-none"
-            pairs.append((f"{run}_vs_{base}", f"{method_title(run)} - {method_title(base)}", (run, "no"), (base, "no")))
-    for run in runs:
-        pairs.append((f"{run}_postprocessed_vs_raw", f"{method_title(run)}: post-processed - raw", (run, "yes"), (run, "no")))
+            pairs.append((f"{run}_vs_{model}-none", (run, "no"), (f"{model}-none", "no")))
+    pairs += [(f"{run}_postprocessed_vs_raw", (run, "yes"), (run, "no")) for run in runs]
     return pairs
 
 
@@ -129,7 +121,7 @@ class Uncertainty:
         self.intervals: dict[tuple[str, str], Interval] = {}
         self.others: dict[tuple[str, str], dict[str, Interval]] = {}  # precision, recall, accuracy
         self.over_seeds: dict[tuple[str, str], tuple[float, float]] = {}  # (mean, sample sd) of the seeds' IoU, with several
-        self.differences: list[tuple[str, str, Interval]] = []  # (metrics key, title, a - b)
+        self.differences: dict[str, Interval] = {}  # metrics key -> a - b
         self.draws: dict[str, Draws] = {}  # metrics key -> the difference's resamples (for the primaries)
 
     def score(self, test: TestSet) -> None:
@@ -148,15 +140,13 @@ class Uncertainty:
             for key, counts in per_seed.items()
         }
         sides = per_seed | {PRIOR: test.prior_counts}
-        for key, title, x, y in comparisons(test.runs):
+        for key, x, y in comparisons(test.runs):
             self.draws[key] = b.paired_draws(sides[x], sides[y], iou)
-            self.differences.append((key, title, self.draws[key].interval()))
-        against_prior = [key for key, _, _, y in comparisons(test.runs) if y == PRIOR]
+            self.differences[key] = self.draws[key].interval()
+        against_prior = [key for key, _, y in comparisons(test.runs) if y == PRIOR]
         if against_prior:
-            weakest = weakest_of({key: self.draws[key] for key in against_prior})
-            self.draws[EVERY_SCRATCH_VS_PRIOR] = self.draws[weakest]
-            title = f"every network without pretraining - mean path prior (intersection-union: the weakest, {weakest.split('_vs_')[0]})"
-            self.differences.append((EVERY_SCRATCH_VS_PRIOR, title, self.draws[weakest].interval()))
+            self.draws[EVERY_SCRATCH_VS_PRIOR] = self.draws[weakest_of({key: self.draws[key] for key in against_prior})]
+            self.differences[EVERY_SCRATCH_VS_PRIOR] = self.draws[EVERY_SCRATCH_VS_PRIOR].interval()
 
     def markdown(self) -> str:
         r = self.resampling
@@ -173,32 +163,15 @@ class Uncertainty:
             "evaluate.conclusions declares primary (the Primary questions section).\n",
         ]
         runs = list(dict.fromkeys(run for run, _ in self.intervals))
-        columns = ["IoU, raw [95 % interval]", "IoU, post-processed [95 % interval]"]
-        if self.over_seeds:
-            lines.append(
-                f"Each method's figure pools the counts of its {len(self.seeds)} training seeds ({', '.join(map(str, self.seeds))}); "
-                "beside each interval, the mean and sample standard deviation of the seeds' own IoU.\n"
-            )
-            columns = [columns[0], "raw, over seeds", columns[1], "post-processed, over seeds"]
-        lines += ["| method | " + " | ".join(columns) + " |", "|" + " --- |" * (1 + len(columns))]
-        lines += [f"| {method_title(run)} | " + " | ".join(self._cells(run, pp) for pp in POSTPROCESSING) + " |" for run in runs]
+        others = ("accuracy", "precision", "recall")
         lines += [
-            "",
+            "Each IoU's interval, and with several training seeds the mean and standard deviation of the seeds' own IoU, are "
+            "in the results table above; here the other scores' intervals (raw maps) and the comparisons.\n",
             "| method (raw) | accuracy [95 % interval] | precision [95 % interval] | recall [95 % interval] |",
             "| --- | --- | --- | --- |",
         ]
-        others = ("accuracy", "precision", "recall")
         lines += [f"| {method_title(run)} | " + " | ".join(self.others[run, "no"][name].text() for name in others) + " |" for run in runs]
-        lines += ["", "| comparison (IoU, a - b) | difference [95 % interval] |", "| --- | --- |"]
-        lines += [f"| {title} | {difference.difference_text()} |" for _, title, difference in self.differences]
-        return "\n".join(lines) + "\n"
-
-    def _cells(self, run: str, pp: str) -> str:
-        text = self.intervals[run, pp].text()
-        if (run, pp) not in self.over_seeds:
-            return text
-        mean, sd = self.over_seeds[run, pp]
-        return f"{text} | {mean:.3f} ± {sd:.3f}"
+        return "\n".join(lines) + "\n\n" + comparisons_markdown(self.metrics()["uncertainty"])
 
     def metrics(self) -> dict:
         def entry(i: Interval, name: str) -> dict:
@@ -209,6 +182,6 @@ class Uncertainty:
             intervals[f"{run}.{PP_KEY[pp]}"] |= {name: entry(i, "estimate") for name, i in others.items()}
         for (run, pp), (mean, sd) in self.over_seeds.items():
             intervals[f"{run}.{PP_KEY[pp]}"] |= {"seed_mean": round(mean, 6), "seed_sd": round(sd, 6)}
-        differences = {key: entry(i, "iou_difference") for key, _, i in self.differences}
+        differences = {key: entry(i, "iou_difference") for key, i in self.differences.items()}
         test_set = {"worlds": self.bootstrap.worlds, "blocks": self.blocks, "seeds": len(self.seeds)}
         return {"uncertainty": {"test_set": test_set, **intervals, **differences}}

@@ -1,0 +1,131 @@
+"""The committed run's results, as the README summarises them and docs/results.md lists them: the
+composition of the tables' one renderers (offroad_path.evaluation.rendering, stress, driving.report),
+with the sentences only these pages need (the label run, PilotNet's seeds, the drive's settings).
+offroad_path.evaluation.readme splices it into the two pages."""
+
+from __future__ import annotations
+
+import statistics
+
+from offroad_path.driving.report import ARGUMENTS, argument_markdown
+from offroad_path.evaluation import stress
+from offroad_path.evaluation.rendering import (
+    against_pilotnet_markdown,
+    baselines_markdown,
+    comparisons_markdown,
+    conditions_markdown,
+    fmt,
+    primaries_markdown,
+    results_table_markdown,
+    temporal_markdown,
+)
+from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR
+from offroad_path.statistics.counts import power_sentence
+
+
+def results_markdown(  # noqa: PLR0913
+    evaluation: dict,
+    label: dict,
+    steering: list[dict],
+    resamples: int,
+    *,
+    drive: dict | None = None,
+    conclusions=None,
+    full: bool = True,
+    temporal_alpha: float = 0.5,
+) -> str:
+    """The results' body (between the markers) from the metrics files (steering: PilotNet's metrics per
+    training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
+    evaluate.bootstrap.resamples of the run that wrote them; conclusions: its evaluate.conclusions (the
+    primaries). full: every table (docs/results.md); else the README's summary: Table 5.1, the primaries,
+    the baselines and the stress sets."""
+    u = evaluation.get("uncertainty", {})
+    blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
+    worlds = u.get("test_set", {}).get("worlds", "n/a")
+    everything = evaluation.get("by_condition", {}).get("all", {})
+    out = [
+        "The committed run: `dvc repro` of the embedded default on a 2-core CPU (`dvc.lock`, `metrics/`; "
+        + ("the evaluate stage's own report is `data/evaluation/results.md`" if full else "every other table: `docs/results.md`")
+        + "). Generated from `metrics/` (`python -m offroad_path.evaluation.readme`; a test fails when it disagrees with them). "
+        "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
+        "the stress sets, each scored on its own.\n",
+        f"Labels: {label['labels']} from {label['sequences']} rendered sequences, {label['segments_dropped']} segments dropped; VO drift "
+        f"over 20 m segments {label['translation_drift_pct']:.2f} % (worst sequence {label['translation_drift_pct_worst']:.2f} %), "
+        f"{label['rotation_drift_deg_per_m']:.4f} deg/m"
+        + (
+            f"; the rig's disparity offset as the VO estimated it, {label['vo_disparity_offset_px_mean']:+.3f} px on average "
+            f"(largest {label['vo_disparity_offset_px_largest']:+.3f} px)"
+            if "vo_disparity_offset_px_mean" in label
+            else ""
+        )
+        + f". Test set: {everything.get('frames', 'n/a')} images (frames and their mirrored "
+        f"copies) from {everything.get('sequences', 'n/a')} held-out test sequences, {blocks} blocks of 20 m of driving; "
+        f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % hierarchical bootstrap ({resamples} "
+        f"resamples): the {worlds} test worlds drawn with replacement, then the blocks within each drawn world, then the "
+        "training seeds, every compared method on the same draw; they cover which test worlds and stretches of driving were "
+        "tested and which seeds trained the networks, with each method's counts pooled over its seeds.\n",
+    ]
+    out += [
+        results_table_markdown(evaluation, heading=""),
+        primaries_markdown(conclusions, evaluation.get("primaries", {}) | (drive or {}).get("primaries", {})),
+    ]
+    if "mean_path_prior" in evaluation.get("baselines", {}):
+        out += [baselines_markdown(evaluation, heading=""), ""]
+    out.append(stress.markdown(evaluation.get("stress_sets", {}), heading="Stress sets (exploratory). "))
+    if full:
+        if table := comparisons_markdown(u, skip=(EVERY_SCRATCH_VS_PRIOR,)):  # the central claim: a primary, above
+            out += ["Exploratory comparisons, not corrected for multiplicity (paired: both on the same draws):\n", table]
+        out += _steering(evaluation, steering)
+        if c := evaluation.get("by_condition"):
+            out += [conditions_markdown(c, heading=""), ""]
+        if t := evaluation.get("temporal"):
+            out += [temporal_markdown(t, temporal_alpha, heading=""), ""]
+        out += _driving(drive or {}, conclusions)
+    return "\n".join(out).rstrip("\n") + "\n"
+
+
+def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
+    s = evaluation.get("steering_from_paths", {})
+    if "pilotnet" not in s:
+        return []
+    first = steering[0] if steering else {}
+    errors = [seed["mean_absolute_error"] for seed in steering]
+    # A seed that learnt a constant (about 0) steers no better than always straight ahead: say so by name.
+    straight = [seed["straight_ahead_mean_absolute_error"] for seed in steering]
+    collapsed = [seed.get("seed", k) for k, seed in enumerate(steering) if errors[k] >= 0.99 * straight[k]]
+    own = f"{fmt(first.get('mean_absolute_error', float('nan')))}" + (
+        f"; over its {len(errors)} training seeds {statistics.mean(errors):.3f} ± {statistics.stdev(errors):.3f}, mean ± sd"
+        if len(errors) > 1
+        else ""
+    )
+    if collapsed:
+        own += (
+            f"; training seed {', '.join(map(str, collapsed))} learnt a constant ({len(collapsed)} of {len(steering)}) and "
+            "steers no better than straight ahead"
+        )
+    lines = [
+        "Steering on the same test frames (mean absolute error of the normalised angle, each network's and PilotNet's pooled over "
+        f"their training seeds): always straight ahead {s['straight_ahead']['mae']:.3f}, PilotNet {s['pilotnet']['mae']:.3f} "
+        f"(on its own test set of {first.get('test_frames', 'n/a')} frames: {own}), the ground-truth label through pure pursuit "
+        f"{s['label_ceiling']['mae']:.3f}. Each path network through pure pursuit, and its paired difference from "
+        "PilotNet (below 0: closer to the true angle than PilotNet; exploratory, but U-Net's is the open-loop primary):\n",
+        against_pilotnet_markdown(s),
+    ]
+    return lines
+
+
+def _driving(drive: dict, conclusions=None) -> list[str]:
+    arguments = [a for a in ARGUMENTS if a in drive]
+    if not arguments:
+        return []
+    d = drive["drives"]
+    lines = [
+        f"Closed loop in the test worlds (`data/drive/results.md`, whose tables these are): {len(d['worlds'])} worlds x "
+        f"{d['starts_per_world']} start(s) x {len(d.get('seeds', [0]))} training seed(s) x {d['length_m']:g} m of route per policy; "
+        "intervals are 95 % hierarchical (worlds, starts, seeds)."
+    ]
+    lines += [argument_markdown(a, drive[a], heading="####") for a in arguments]
+    for name, entry in drive.get("primaries", {}).items():
+        if sentence := power_sentence(entry, conclusions.power if conclusions is not None else 0.8):
+            lines.append(f"- Primary `{name}`: {sentence} (at its planning rates in evaluate.conclusions; Holm's strictest level).")
+    return [*lines, ""]
