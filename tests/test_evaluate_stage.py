@@ -12,45 +12,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import evaluate_config as stage_config
+from helpers import write_run
 
 from offroad_path.data.loading import load_labels
-from offroad_path.data.manifest import prediction_name, read_manifest, read_predictions_manifest, write_predictions_manifest
+from offroad_path.data.manifest import read_manifest, read_predictions_manifest
 from offroad_path.evaluate import evaluate
 from offroad_path.evaluation.metrics import counts, pooled
 from offroad_path.evaluation.uncertainty import sample_blocks
-from offroad_path.postprocess import run_postprocess
 
 SHIFT_PX = 24
-
-
-def stage_config(compose_config, split_dir: Path, root: Path, *overrides: str):
-    labels_dir = Path(read_manifest(split_dir / "test.csv")[0].label).parents[2]  # <labels>/<sequence>/label/NNNNNN.png
-    return compose_config(
-        f"split.out_dir={split_dir}", f"split.labels_dir={labels_dir}",
-        f"evaluate.steering_from_paths.pilotnet_predictions={root / 'steering' / 'predictions.csv'}",
-        "evaluate.seeds=[0]",  # the runs these tests write; one test writes two seeds
-        f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
-        f"evaluate.out_dir={root / 'evaluation'}", f"evaluate.metrics_path={root / 'metrics.json'}",
-        f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}",
-        "evaluate.temporal.enabled=false",  # made-up maps, no networks to run on every frame (tests/test_temporal.py)
-        "split.block_m=1", *overrides,  # the split fixture's test set is one 4 m block: resampled in blocks of 1 m
-    )  # fmt: skip
-
-
-def write_run(compose_config, split_dir: Path, root: Path, run: str, seed: int, maps: np.ndarray) -> None:
-    """What train and postprocess write for `run` at `seed`, with `maps` as its predictions."""
-    samples = read_manifest(split_dir / "test.csv")
-    out = root / "runs" / run / f"seed{seed}" / "predictions"
-    rows = []
-    for sample, m in zip(samples, maps, strict=True):
-        (out / sample.sequence).mkdir(parents=True, exist_ok=True)
-        np.save(out / prediction_name(sample), m.astype(np.float16))
-        rows.append((sample, str(out / prediction_name(sample))))
-    write_predictions_manifest(out / "manifest.csv", rows)
-    model, pretraining = run.split("-")
-    post = root / "post" / run / f"seed{seed}"
-    run_postprocess(stage_config(compose_config, split_dir, root, f"model={model}", f"pretraining={pretraining}",
-                                 f"postprocess.predictions_dir={out}", f"postprocess.out_dir={post}"))  # fmt: skip
 
 
 @pytest.fixture

@@ -12,7 +12,6 @@ precision-recall CSV per run, for `dvc plots show`); one MLflow run linking the 
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -20,8 +19,9 @@ from omegaconf import DictConfig
 
 from offroad_path.data.labels import label_run_folders
 from offroad_path.data.manifest import manifest_folders
-from offroad_path.evaluation.tables import ResultRow, split_run_name
+from offroad_path.evaluation.tables import split_run_name
 from offroad_path.stage import hydra_stage, reads
+from offroad_path.statistics.scores import Record
 from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.progress import Progress
 from offroad_path.utils.tracking import stage_run, tracking_uri
@@ -54,7 +54,7 @@ def outputs(cfg: DictConfig) -> Outputs:
 
 
 @reads("evaluate", "label", "split", "mlflow", writes=outputs)
-def evaluate(cfg: DictConfig) -> list[ResultRow]:
+def evaluate(cfg: DictConfig) -> list[Record]:
     # The work's modules (torch among them) once the config and outputs are checked: a refusal is fast.
     from offroad_path.evaluation.report import TestSet, write_report
     from offroad_path.evaluation.sections import (
@@ -144,7 +144,7 @@ def flat(metrics: dict, prefix: str = "") -> dict[str, float]:
     return out
 
 
-def log_to_mlflow(cfg: DictConfig, sections: list[Section], table: list[ResultRow]) -> None:
+def log_to_mlflow(cfg: DictConfig, sections: list[Section], table: list[Record]) -> None:
     with stage_run(cfg, "evaluate") as run:
         if run is None:
             return
@@ -155,7 +155,7 @@ def log_to_mlflow(cfg: DictConfig, sections: list[Section], table: list[ResultRo
         mlflow.log_metrics(flat(report_metrics(sections)))  # <run>.raw.iou, baselines.mean_path_prior.iou, ...
         linked = training_runs(cfg)
         mlflow.set_tags({f"training_run.{name}": run_id for name, run_id in linked.items()})
-        mlflow.log_table({k: [getattr(r, k) for r in table] for k in asdict(table[0])}, artifact_file="results.json")
+        mlflow.log_table({k: [r[k] for r in table] for k in table[0]}, artifact_file="results.json")
         mlflow.log_artifacts(cfg.evaluate.out_dir)
         mlflow.log_artifacts(cfg.evaluate.plots_dir, "precision_recall")
         log.info("MLflow run %s, linked to %d training runs", run.info.run_id, len(linked))

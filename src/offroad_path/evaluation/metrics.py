@@ -111,7 +111,7 @@ def non_corresponding(predicted: np.ndarray, target: np.ndarray, groups: list) -
     # Each pair is one image scored against one truth: IoU by the per-image convention, and the
     # mean over pairs skips a pair whose score is undefined (nan: no path in it).
     per_pair = {name: iou_per_image(pair_counts) if name == "iou" else score(pair_counts) for name, score in SCORES.items()}
-    return Scores(**{name: float(torch.nanmean(value[pairs])) for name, value in per_pair.items()})
+    return Scores({name: float(torch.nanmean(value[pairs])) for name, value in per_pair.items()})
 
 
 def mean_path(labels: np.ndarray) -> np.ndarray:

@@ -4,10 +4,12 @@ dicts), one function per table: evaluate's results.md, the README's summary and 
 
 from __future__ import annotations
 
+from math import nan
+
 from offroad_path.evaluation.tables import (
     EVERY_SCRATCH_VS_PRIOR,
-    BaselineRow,
     baseline_name,
+    baseline_row,
     comparison_title,
     fmt,
     markdown_table,
@@ -18,6 +20,7 @@ from offroad_path.evaluation.tables import (
 from offroad_path.evaluation.temporal import TemporalRow
 from offroad_path.statistics.bootstrap import Interval
 from offroad_path.statistics.primaries import Verdict, verdicts
+from offroad_path.statistics.scores import SCORES, TITLES
 from offroad_path.world.groups import GROUPS
 
 # Holder 2018 (thesis), Table 5.1 (accuracy, IoU): their private data, full-size networks from random weights
@@ -48,26 +51,26 @@ def results_table_markdown(m: dict, heading: str = "\n## Results (Table 5.1 layo
     runs = [key for key, value in m.items() if isinstance(value, dict) and "raw" in value]
     seeds = u.get("test_set", {}).get("seeds", 1)
     lines = [
-        f"{heading}Pooled over the test set, each method's training seeds together: accuracy, recall, precision, and IoU with "
+        f"{heading}Pooled over the test set, each method's training seeds together: every score (statistics.scores), IoU with "
         "its 95 % hierarchical-bootstrap interval; beside them the thesis's figures (Holder 2018, Table 5.1: its private data, "
         "full-size networks on a GPU; its pretraining rows pretrained on a semantic segmentation task, as ours on the world's "
         "8 classes, its other rows from random weights).\n",
-        "| network | pretraining | post-processing | accuracy | recall | precision | IoU [95 % interval] | "
-        + ("IoU over seeds, mean ± sd | " if seeds > 1 else "")
-        + "paper: accuracy | paper: IoU |",
-        "| --- | --- | --- | --- | --- | --- | --- | " + ("--- | " if seeds > 1 else "") + "--- | --- |",
+        "| network | pretraining | post-processing | "
+        + " | ".join(f"{TITLES.get(name, name)} [95 % interval]" if name == "iou" else TITLES.get(name, name) for name in SCORES)
+        + (" | IoU over seeds, mean ± sd" if seeds > 1 else "")
+        + " | paper: accuracy | paper: IoU |",
+        "|" + " --- |" * (5 + len(SCORES) + (seeds > 1)),
     ]
     for run in runs:
         model, pretraining = split_run_name(run)
         for pp, key in PP_KEYS.items():
             r, entry = m[run][key], u.get(f"{run}.{key}")
             found = interval(entry, "iou")
+            cells = [found.text() if name == "iou" and found else fmt(nan if r[name] is None else r[name]) for name in SCORES]
+            if seeds > 1:
+                cells.append(f"{entry['seed_mean']:.3f} ± {entry['seed_sd']:.3f}" if entry and "seed_mean" in entry else "")
             paper = PAPER.get((model, pretraining, pp), ("", ""))
-            spread = f"{entry['seed_mean']:.3f} ± {entry['seed_sd']:.3f} | " if seeds > 1 and entry and "seed_mean" in entry else ""
-            lines.append(
-                f"| {network_name(model)} | {pretraining} | {pp} | {fmt(r['accuracy'])} | {fmt(r['recall'])} | {fmt(r['precision'])} | "
-                f"{found.text() if found else fmt(r['iou'])} | {spread}{paper[0]} | {paper[1]} |"
-            )
+            lines.append(f"| {network_name(model)} | {pretraining} | {pp} | " + " | ".join([*cells, *map(str, paper)]) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -178,11 +181,7 @@ def baselines_markdown(m: dict, heading: str = "\n## Baselines\n\n") -> str:
         else ""
     )
     prior = b["mean_path_prior"]
-    undefined = float("nan")  # metrics.json's None: a score without a value (n/a in the table)
-    rows = [
-        BaselineRow(baseline_name(key), *(undefined if v[k] is None else v[k] for k in ("accuracy", "recall", "precision", "iou")))
-        for key, v in b.items()
-    ]
+    rows = [baseline_row(baseline_name(key), v) for key, v in b.items()]
     return (
         f"{heading}What a model must beat, on the same test set: the mean path prior (the average training label, thresholded, "
         f"on every image) scores accuracy {prior['accuracy']:.3f} and IoU {prior['iou']:.3f}; each network's outputs against "

@@ -25,17 +25,12 @@ from offroad_path.evaluation.rendering import (
 )
 from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
-from offroad_path.evaluation.tables import (
-    ResultRow,
-    markdown_table,
-    method_title,
-    network_name,
-    split_run_name,
-)
+from offroad_path.evaluation.tables import markdown_table, method_title, network_name, result_row, split_run_name
 from offroad_path.evaluation.temporal import TemporalRow, score_temporal
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, Uncertainty
 from offroad_path.statistics.bootstrap import Draws, Interval, mean
 from offroad_path.statistics.primaries import from_draws, owned
+from offroad_path.statistics.scores import Record
 
 log = logging.getLogger(__name__)
 
@@ -46,8 +41,9 @@ def networks(e: DictConfig, test: TestSet) -> dict[str, Path]:
 
 
 def numbers(row) -> dict:
-    """A row's numbers for metrics.json, rounded; None for undefined (JSON has no nan)."""
-    return {k: (None if v != v else round(v, 6)) for k, v in asdict(row).items() if isinstance(v, float)}
+    """A row's numbers (a Record's or a dataclass's) for metrics.json, rounded; None for undefined (JSON has no nan)."""
+    items = row.items() if isinstance(row, dict) else asdict(row).items()
+    return {k: (None if v != v else round(v, 6)) for k, v in items if isinstance(v, float)}
 
 
 class ResultsTable:
@@ -57,7 +53,7 @@ class ResultsTable:
     def __init__(self, uncertainty: Uncertainty | None = None) -> None:
         self.uncertainty = uncertainty  # its intervals go in the table (None: the pooled figures alone)
         self.runs: list[str] = []
-        self.rows: dict[tuple[str, str], ResultRow] = {}
+        self.rows: dict[tuple[str, str], Record] = {}
         self.per_image_iou: dict[tuple[str, str], np.ndarray] = {}
         self.without_depth, self.images = 0, 0  # test images of one camera (post-processed without the depth mask), of all
 
@@ -69,13 +65,11 @@ class ResultsTable:
             for pp in POSTPROCESSING:
                 per_image = test.counts[run, pp]
                 ious, s = per_image_iou(per_image), pooled(per_image)
-                self.rows[run, pp] = ResultRow(
-                    network_name(model), pretraining, pp, s.accuracy, s.recall, s.precision, s.iou, float(ious.mean())
-                )
+                self.rows[run, pp] = result_row(network_name(model), pretraining, pp, s, float(ious.mean()))
                 self.per_image_iou[run, pp] = ious
             log.info("%s: IoU %.3f, post-processed %.3f", run, self.rows[run, "no"].iou, self.rows[run, "yes"].iou)
 
-    def table(self) -> list[ResultRow]:
+    def table(self) -> list[Record]:
         return [self.rows[run, pp] for run in self.runs for pp in POSTPROCESSING]
 
     def markdown(self) -> str:
@@ -138,7 +132,7 @@ class Baselines:
         for run in test.runs:
             if len(set(groups)) < 2:
                 log.warning("the test set holds one frame: no non-corresponding baseline")
-                self.scores[f"non_corresponding.{run}"] = Scores(*[float("nan")] * 4)
+                self.scores[f"non_corresponding.{run}"] = Scores.undefined()
             else:
                 self.scores[f"non_corresponding.{run}"] = non_corresponding(test.predicted[run], test.labels, groups)
         self.scores["mean_path_prior"] = pooled(test.prior_counts)

@@ -1,39 +1,30 @@
-"""The results table in the layout of the paper's Table 5.1, and the baselines table: rows are
-dataclasses, and the Markdown and CSV tables are generated from their fields (a field's `title`
-names its Markdown column)."""
+"""Rows and names of the evaluate stage's tables: the results table (the paper's Table 5.1) and the
+baselines table take their score columns from the registry (statistics.scores.SCORES); Markdown and
+CSV are generated from a row's keys (a Record) or fields (a dataclass, titled by its metadata)."""
 
 from __future__ import annotations
 
 import csv
 import io
 import math
-from dataclasses import asdict, dataclass, field, fields
+from collections.abc import Mapping
+from dataclasses import fields
+
+from offroad_path.statistics.scores import SCORES, TITLES, Record
+
+# Column titles of the registry-made tables where a column's name is not its title (a score's: TITLES).
+COLUMN_TITLES = {"postprocessing": "post-processing", "mean_image_iou": "per-image mean IoU"}
 
 
-def _title(text: str) -> dict:
-    return {"title": text}
+def result_row(network: str, pretraining: str, postprocessing: str, scores: Mapping[str, float], mean_image_iou: float) -> Record:
+    """A row of the results table: a run, raw or post-processed, its pooled scores (every registered
+    one) and the per-image mean IoU (not the paper's pooled IoU)."""
+    return Record(network=network, pretraining=pretraining, postprocessing=postprocessing, **scores, mean_image_iou=mean_image_iou)
 
 
-@dataclass(frozen=True)
-class ResultRow:
-    network: str
-    pretraining: str
-    postprocessing: str = field(metadata=_title("post-processing"))
-    accuracy: float
-    recall: float
-    precision: float
-    iou: float = field(metadata=_title("IoU"))
-    # per-image IoU averaged over images: not the paper's pooled IoU
-    mean_image_iou: float = field(metadata=_title("per-image mean IoU"))
-
-
-@dataclass(frozen=True)
-class BaselineRow:
-    baseline: str
-    accuracy: float
-    recall: float
-    precision: float
-    iou: float = field(metadata=_title("IoU"))
+def baseline_row(baseline: str, scores: Mapping[str, float | None]) -> Record:
+    """A row of the baselines table; a score metrics.json holds as None (undefined) is nan (n/a)."""
+    return Record(baseline=baseline, **{name: float("nan") if scores[name] is None else scores[name] for name in SCORES})
 
 
 def split_run_name(run: str) -> tuple[str, str]:
@@ -92,18 +83,30 @@ def fmt(x: float | int | str) -> str:
     return "n/a" if math.isnan(x) else f"{x:.3f}"
 
 
+def _columns(row) -> list[tuple[str, str]]:
+    """(name, title) of a row's columns: a Record's keys, or a dataclass's fields (titled by their metadata)."""
+    if isinstance(row, dict):
+        return [(name, TITLES.get(name) or COLUMN_TITLES.get(name, name)) for name in row]
+    return [(f.name, f.metadata.get("title", f.name)) for f in fields(row)]
+
+
+def _value(row, name: str):
+    return row[name] if isinstance(row, dict) else getattr(row, name)
+
+
 def markdown_table(rows: list) -> str:
-    """A Markdown table of dataclass rows, one column per field."""
-    columns = fields(rows[0])
-    lines = ["| " + " | ".join(f.metadata.get("title", f.name) for f in columns) + " |", "|" + " --- |" * len(columns)]
-    lines += ["| " + " | ".join(fmt(getattr(row, f.name)) for f in columns) + " |" for row in rows]
+    """A Markdown table of rows (Records or dataclasses), one column per key or field."""
+    columns = _columns(rows[0])
+    lines = ["| " + " | ".join(title for _, title in columns) + " |", "|" + " --- |" * len(columns)]
+    lines += ["| " + " | ".join(fmt(_value(row, name)) for name, _ in columns) + " |" for row in rows]
     return "\n".join(lines) + "\n"
 
 
 def csv_text(rows: list) -> str:
-    """CSV of dataclass rows: a header of field names, floats rounded to 6 decimals."""
+    """CSV of rows (Records or dataclasses): a header of names, floats rounded to 6 decimals."""
     out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=[f.name for f in fields(rows[0])], lineterminator="\n")
+    names = [name for name, _ in _columns(rows[0])]
+    writer = csv.DictWriter(out, fieldnames=names, lineterminator="\n")
     writer.writeheader()
-    writer.writerows({k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(r).items()} for r in rows)
+    writer.writerows({k: (round(v, 6) if isinstance(v, float) else v) for k, v in ((n, _value(r, n)) for n in names)} for r in rows)
     return out.getvalue()

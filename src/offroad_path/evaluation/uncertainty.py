@@ -24,7 +24,7 @@ from offroad_path.evaluation.rendering import comparisons_markdown
 from offroad_path.evaluation.report import PP_KEY, TestSet
 from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR, method_title, split_run_name
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
-from offroad_path.statistics.scores import SCORES, Score, iou
+from offroad_path.statistics.scores import SCORES, TITLES, Score, iou
 
 
 def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> list[tuple[str, int]]:
@@ -136,8 +136,7 @@ class Uncertainty:
         per_seed = {key: np.stack(seeds) for key, seeds in test.seed_counts.items()}  # (S, N, 4)
         self.intervals = {key: b.interval(counts, iou) for key, counts in per_seed.items()}
         self.others = {
-            key: {name: b.interval(counts, SCORES[name]) for name in ("precision", "recall", "accuracy")}
-            for key, counts in per_seed.items()
+            key: {name: b.interval(counts, score) for name, score in SCORES.items() if name != "iou"} for key, counts in per_seed.items()
         }
         sides = per_seed | {PRIOR: test.prior_counts}
         for key, x, y in comparisons(test.runs):
@@ -163,12 +162,12 @@ class Uncertainty:
             "evaluate.conclusions declares primary (the Primary questions section).\n",
         ]
         runs = list(dict.fromkeys(run for run, _ in self.intervals))
-        others = ("accuracy", "precision", "recall")
+        others = [name for name in SCORES if name != "iou"]
         lines += [
             "Each IoU's interval, and with several training seeds the mean and standard deviation of the seeds' own IoU, are "
             "in the results table above; here the other scores' intervals (raw maps) and the comparisons.\n",
-            "| method (raw) | accuracy [95 % interval] | precision [95 % interval] | recall [95 % interval] |",
-            "| --- | --- | --- | --- |",
+            "| method (raw) | " + " | ".join(f"{TITLES.get(name, name)} [95 % interval]" for name in others) + " |",
+            "|" + " --- |" * (1 + len(others)),
         ]
         lines += [f"| {method_title(run)} | " + " | ".join(self.others[run, "no"][name].text() for name in others) + " |" for run in runs]
         return "\n".join(lines) + "\n\n" + comparisons_markdown(self.metrics()["uncertainty"])

@@ -4,14 +4,15 @@ the real-footage rows and training's logged metrics.
 
 A score is a function of confusion counts (..., 4) in the order tp, fp, tn, fn, vectorised over
 the leading axes (a bootstrap's resamples, a matrix of image pairs), for NumPy arrays and torch
-tensors alike; a score whose denominator is 0 is nan. Adding a score: its function and its name
-in SCORES here, and a field in `Scores`.
+tensors alike; a score whose denominator is 0 is nan. Adding a score is this file alone: its
+function, its name in SCORES, and a title in TITLES when its name is not its column title. Every
+table, interval, metrics file and training log takes its scores from SCORES
+(tests/test_extending.py adds one and runs evaluate with it).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TypeVar
 
 import numpy as np
@@ -59,17 +60,29 @@ Score = Callable[[np.ndarray], np.ndarray]
 SCORES: dict[str, Score] = {"accuracy": accuracy, "precision": precision, "recall": recall, "iou": iou}
 
 
-@dataclass(frozen=True)
-class Scores:
-    """The four scores of one set of pooled counts, in the paper's column order."""
+TITLES: dict[str, str] = {"iou": "IoU"}  # a score's column title where it is not its name
 
-    accuracy: float
-    recall: float
-    precision: float
-    iou: float
+
+class Record(dict):
+    """A row of named values, read as r["iou"] or r.iou (tables and scores whose columns come from registries)."""
+
+    def __getattr__(self, name: str):
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+class Scores(Record):
+    """Every registered score (SCORES) of one set of pooled counts, by name, in SCORES' order."""
 
     @classmethod
     def of(cls, pooled_counts: np.ndarray) -> Scores:
         """From counts (4,) summed over a test set (the paper pools before scoring)."""
         c = np.asarray(pooled_counts)
-        return cls(**{name: float(score(c)) for name, score in SCORES.items()})
+        return cls({name: float(score(c)) for name, score in SCORES.items()})
+
+    @classmethod
+    def undefined(cls) -> Scores:
+        """Every score nan: a set with nothing to score."""
+        return cls(dict.fromkeys(SCORES, float("nan")))

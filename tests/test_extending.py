@@ -1,0 +1,44 @@
+"""docs/extending.md's recipes, each done with a stand-in and run: a score is one entry in
+statistics/scores.py (tests/test_architectures.py does the same for a network)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from helpers import evaluate_config, write_run
+
+from offroad_path.data.loading import load_labels
+from offroad_path.data.manifest import read_manifest
+from offroad_path.evaluate import evaluate
+from offroad_path.statistics import scores
+from offroad_path.statistics.scores import FN, FP, TP, ratio
+
+
+def dice(c):
+    """A stand-in fifth score: the Dice coefficient (F1), 2 tp / (2 tp + fp + fn)."""
+    return ratio(2 * c[..., TP], 2 * c[..., TP] + c[..., FP] + c[..., FN])
+
+
+def test_a_score_added_to_the_registry_reaches_every_table_and_metrics_file(compose_config, split_dir, tmp_path, monkeypatch):
+    monkeypatch.setitem(scores.SCORES, "dice", dice)
+    monkeypatch.setitem(scores.TITLES, "dice", "Dice")
+    labels = load_labels(read_manifest(split_dir / "test.csv")).astype(np.float32)
+    shifted = 0.9 * np.roll(labels, 24, axis=2)
+    write_run(compose_config, split_dir, tmp_path, "unet-none", 0, shifted)
+    rows = evaluate(evaluate_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none]", "evaluate.bootstrap.resamples=200"))
+
+    # The pooled counts of the shifted maps, by hand: Dice is 2 IoU / (1 + IoU) of the same counts.
+    iou = rows[0]["iou"]
+    assert rows[0]["dice"] == pytest.approx(2 * iou / (1 + iou), abs=1e-9)
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["unet-none"]["raw"]["dice"] == pytest.approx(rows[0]["dice"], abs=1e-6)
+    assert set(metrics["baselines"]["mean_path_prior"]) == {"accuracy", "precision", "recall", "iou", "dice"}
+    interval = metrics["uncertainty"]["unet-none.raw"]["dice"]
+    assert interval["low"] <= interval["estimate"] <= interval["high"]
+    report = (tmp_path / "evaluation" / "results.md").read_text()
+    assert "| accuracy | precision | recall | IoU [95 % interval] | Dice |" in report  # Table 5.1
+    assert "| Dice [95 % interval] |" in report  # the other scores' intervals
+    assert "| baseline | accuracy | precision | recall | IoU | Dice |" in report
+    assert (tmp_path / "evaluation" / "results.csv").read_text().splitlines()[0].endswith(",iou,dice,mean_image_iou")
