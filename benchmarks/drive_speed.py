@@ -27,7 +27,7 @@ from offroad_path.driving.worlds import drive_params, make_policy, test_worlds
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.world.record import rebuild_world
 from offroad_path.world.render import PinholeCamera
-from offroad_path.world.scene import vehicle_geometry
+from offroad_path.world.trajectory import VehicleGeometry
 
 
 def main() -> None:
@@ -44,7 +44,7 @@ def main() -> None:
     start = time.perf_counter()
     world = rebuild_world(cfg.world, Path(world_info.folder))
     print(f"{world_info.name}: rebuilt in {time.perf_counter() - start:.1f} s; camera {d.width} x {d.height}, {args.metres:g} m per policy")
-    geometry = vehicle_geometry(cfg.world)
+    geometry = VehicleGeometry.of(cfg.world.vehicle)
     camera = PinholeCamera.from_fov(d.width, d.height, cfg.world.hfov_deg)
     rig = StereoRig(world, camera, cfg.world.rig.baseline_m, cfg.world.max_distance_m, sgbm(cfg.label.disparity))
     settings = LoopSettings(d.rate_hz, d.speed_mps, args.metres, d.respawn_m, d.timeout_factor, d.water_intervenes)

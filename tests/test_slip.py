@@ -14,8 +14,9 @@ import pytest
 from offroad_path.driving.vehicle import State, Vehicle, advance
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.record import record_sequence, steering_under_slip
-from offroad_path.world.scene import build_world, vehicle_geometry
+from offroad_path.world.scene import build_world
 from offroad_path.world.slip import make_slip
+from offroad_path.world.trajectory import VehicleGeometry
 
 SMALL = ("world.frames=8", "world.width=64", "world.height=36")
 NO_JITTER = ("world.slip.jitter=0", "world.slip.noise=0")
@@ -45,7 +46,7 @@ def test_with_slip_the_recorded_steering_makes_the_true_motion_on_that_ground(co
     cfg = compose_config(*SMALL, "world.frames=60", "world.slip.enabled=true", *NO_JITTER).world
     slippery, plain = build_world(cfg, 7), build_world(compose_config(*SMALL, "world.frames=60").world, 7)
     np.testing.assert_array_equal(slippery.poses, plain.poses)  # the same drive
-    vehicle = vehicle_geometry(cfg)
+    vehicle = VehicleGeometry.of(cfg.vehicle)
     xz, _, curvature = plain.drive.at(plain.frame_s)
     factor = np.array([cfg.slip.factors.get(CLASS_NAMES[c], 1.0) for c in plain.surface(xz)])
     lock = math.radians(vehicle.max_steering_deg)
@@ -73,7 +74,7 @@ def test_an_unknown_surface_is_named(compose_config):
 
 
 def test_the_driven_vehicle_turns_by_the_grounds_factor(compose_config):
-    geometry = vehicle_geometry(compose_config().world)
+    geometry = VehicleGeometry.of(compose_config().world.vehicle)
     grip, half = Vehicle(geometry, 1e6), Vehicle(geometry, 1e6, yaw_factor=lambda xz: 0.5)
     a, _ = advance(State(np.zeros(2), 0.0, 0.0), grip, 0.2, 5.0, 0.2)
     b, _ = advance(State(np.zeros(2), 0.0, 0.0), half, 0.2, 5.0, 0.2)

@@ -11,8 +11,8 @@ from offroad_path.labelling.frame_selection import select_segments
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.record import camera_for, record_sequence, sequence_seed
 from offroad_path.world.render import render_view
-from offroad_path.world.scene import build_world, vehicle_geometry
-from offroad_path.world.trajectory import ARC_STEP_M, integrate_curve, normalised_steering
+from offroad_path.world.scene import build_world
+from offroad_path.world.trajectory import ARC_STEP_M, VehicleGeometry, integrate_curve, normalised_steering
 
 
 def test_constant_curvature_drives_a_circle_to_the_right():
@@ -25,7 +25,7 @@ def test_constant_curvature_drives_a_circle_to_the_right():
 
 
 def test_steering_is_the_bicycle_model_angle(compose_config):
-    vehicle = vehicle_geometry(compose_config().world)
+    vehicle = VehicleGeometry.of(compose_config().world.vehicle)
     # wheelbase 2.8 m, max 30 deg: atan(2.8 * 0.05) = 7.970 deg -> 0.2657; far past the limit -> 1.
     np.testing.assert_allclose(normalised_steering(np.array([0.05, -0.05, 0.0, 5.0]), vehicle), [0.26567, -0.26567, 0.0, 1.0], atol=1e-4)
 

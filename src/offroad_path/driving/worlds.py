@@ -27,7 +27,7 @@ from offroad_path.utils.media import VideoFile
 from offroad_path.utils.rules import ConfigValueError
 from offroad_path.world.record import check_rendered_with, rebuild_world
 from offroad_path.world.render import PinholeCamera
-from offroad_path.world.scene import World, vehicle_geometry
+from offroad_path.world.scene import World
 from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip
 from offroad_path.world.trajectory import VehicleGeometry
 
@@ -134,10 +134,6 @@ class WorldJob:
     video: bool
 
 
-def _geometry(v) -> VehicleGeometry:
-    return VehicleGeometry(**{k: float(v[k]) for k in VehicleGeometry.__dataclass_fields__})
-
-
 def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
     """Every argument's policies from every start with every training seed in one world: (argument,
     log) in a fixed order (seed, argument, policy, start); the plots and the video show the first seed."""
@@ -153,7 +149,7 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
         first = seed == job.training_seeds[0]
         policies: dict[str, Policy] = {}
         for argument, names in d.arguments.items():
-            geometry = _geometry(d.other_vehicle) if argument == "vehicle" else vehicle_geometry(job.world_cfg)
+            geometry = VehicleGeometry.of(d.other_vehicle) if argument == "vehicle" else VehicleGeometry.of(job.world_cfg.vehicle)
             course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
             rig = StereoRig(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
             usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)

@@ -79,20 +79,6 @@ class World:
         return self.materials[row, col]
 
 
-def vehicle_geometry(cfg: WorldConfig) -> VehicleGeometry:
-    vehicle = cfg.vehicle
-    return VehicleGeometry(
-        wheelbase_m=vehicle.wheelbase_m,
-        track_m=vehicle.track_m,
-        width_m=vehicle.width_m,
-        length_m=vehicle.length_m,
-        camera_height_m=vehicle.camera_height_m,
-        camera_forward_m=vehicle.camera_forward_m,
-        camera_pitch_deg=vehicle.camera_pitch_deg,
-        max_steering_deg=vehicle.max_steering_deg,
-    )
-
-
 def build_world(cfg: WorldConfig, seed: int, draw: str = "training") -> World:
     """The world drawn from `seed`; `draw`: how its appearance is drawn (world.appearance.DRAWS):
     by world.appearance.weights, from every value alike, or one of world.appearance.held_out's
@@ -136,7 +122,7 @@ def build_world(cfg: WorldConfig, seed: int, draw: str = "training") -> World:
     heights = _flatten_puddles(heights, hgrid, puddles)
     terrain = Terrain(heights, hgrid)
 
-    vehicle = vehicle_geometry(cfg)
+    vehicle = VehicleGeometry.of(cfg.vehicle)
     poses = camera_poses(drive, frame_s, terrain, vehicle)
     frame_xz, _, frame_curvature = drive.at(frame_s)
     slip = make_slip(cfg.slip, seed, lo, hi) if cfg.slip.enabled else None

@@ -6,7 +6,8 @@ Steering follows a kinematic bicycle model: delta = atan(wheelbase * curvature).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -82,6 +83,12 @@ class VehicleGeometry:
     camera_forward_m: float  # camera ahead of the body centre
     camera_pitch_deg: float  # downward tilt of the optical axis
     max_steering_deg: float
+
+    @classmethod
+    def of(cls, vehicle) -> VehicleGeometry:
+        """From the `vehicle` config (world.vehicle, drive.other_vehicle) or meta.json's `vehicle`: the same names."""
+        value = (lambda name: vehicle[name]) if isinstance(vehicle, Mapping) else (lambda name: getattr(vehicle, name))
+        return cls(**{f.name: float(value(f.name)) for f in fields(cls)})
 
 
 def camera_poses(curve: Curve, s: np.ndarray, terrain: Terrain, vehicle: VehicleGeometry) -> np.ndarray:
