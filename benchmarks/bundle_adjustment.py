@@ -22,7 +22,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
-from offroad_path.config import OdometryConfig, load_config
+from offroad_path.config import load_config
+from offroad_path.config.labelling import OdometryConfig
 from offroad_path.odometry.trajectory import drift, run_odometry
 from offroad_path.odometry.windowed import WindowedOdometry
 from offroad_path.sequence import open_sequence

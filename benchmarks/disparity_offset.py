@@ -27,7 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offroad_path.config import OdometryConfig, load_config
+from offroad_path.config import load_config
+from offroad_path.config.labelling import OdometryConfig
 from offroad_path.odometry.features import FrontEnd
 from offroad_path.odometry.trajectory import drift, run_odometry
 from offroad_path.sequence import find_sequences, open_sequence

@@ -34,8 +34,6 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from transfer_real import label_recording
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from seed_spread import key, test_counts
 
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import read_manifest
@@ -42,9 +43,6 @@ from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.statistics.bootstrap import Resampling
 from offroad_path.statistics.scores import iou
-
-sys.path.insert(0, str(Path(__file__).parent))
-from seed_spread import key, test_counts
 
 BLOCK_M = 20.0  # the split's blocks of driving, which the intervals resample
 

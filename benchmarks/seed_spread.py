@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import statistics
 import subprocess
 import sys
@@ -46,13 +45,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from scipy import stats
 
 from offroad_path.data.loading import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
-from offroad_path.evaluation.metrics import counts, mean_path, pooled
-
-PER_SEED = ("seeds", "score", "epochs", "seconds", "counts")  # a network's lists in the --json file, one entry per seed
+from offroad_path.evaluation.metrics import counts, mean_path
+from offroad_path.statistics.noninferiority import PER_SEED, compare, iou, mae, merge
 
 
 def key(sample: Sample) -> str:
@@ -93,10 +90,6 @@ def prior_counts(yardstick: dict[str, str] | None, threshold: float = 0.5) -> di
     return {key(s): c.tolist() for s, c in zip(test, per_image, strict=True)}
 
 
-def iou(per_image: dict[str, list[int]], keys: list[str]) -> float:
-    return pooled(np.array([per_image[k] for k in keys])).iou
-
-
 def steering_errors(run_dir: Path) -> tuple[dict[str, float], dict[str, float]]:
     """Per test frame (by frame key) PilotNet's absolute error and always-straight-ahead's (|true|), from predictions.csv."""
     errors, straight = {}, {}
@@ -106,10 +99,6 @@ def steering_errors(run_dir: Path) -> tuple[dict[str, float], dict[str, float]]:
             errors[frame] = abs(float(row["predicted"]) - float(row["true"]))
             straight[frame] = abs(float(row["true"]))
     return errors, straight
-
-
-def mae(errors: dict[str, float], keys: list[str]) -> float:
-    return float(np.mean([errors[k] for k in keys]))
 
 
 def train_command(model: str, seed: int, out: Path, overrides: list[str]) -> list[str]:
@@ -161,76 +150,6 @@ def train_seeds(args: argparse.Namespace, yardstick: dict[str, str] | None) -> d
     return results
 
 
-def merge(files: list[dict]) -> dict:
-    """One file of the same preset and yardstick from several that hold other seeds, seeds in order."""
-    first = files[0]
-    if any((f["overrides"], f["labels"]) != (first["overrides"], first["labels"]) for f in files):
-        sys.exit("--merge: the files were made with other overrides or labels")
-    models: dict[str, dict] = {}
-    for f in files:
-        for model, row in f["models"].items():
-            into = models.setdefault(model, {key: [] for key in PER_SEED})
-            for key in PER_SEED:
-                into[key] += row[key]
-            if "straight" in row:
-                into["straight"] = row["straight"]
-    for model, row in models.items():
-        if len(set(row["seeds"])) != len(row["seeds"]):
-            sys.exit(f"--merge: {model} has seed {row['seeds']} twice")
-        order = np.argsort(row["seeds"])
-        for key in PER_SEED:
-            row[key] = [row[key][i] for i in order]
-    return {**first, "models": models}
-
-
-def one_sided(diffs: list[float], sign: int) -> tuple[float, float, float, float]:
-    """Mean, sample sd, standard error and the one-sided 95 % bound (lower for sign +1, upper for -1) of paired differences."""
-    n, mean_d = len(diffs), statistics.mean(diffs)
-    sd = statistics.stdev(diffs) if n > 1 else math.nan
-    se = sd / math.sqrt(n)
-    return mean_d, sd, se, mean_d - sign * float(stats.t.ppf(0.95, n - 1)) * se
-
-
-def compare(reference: dict, candidate: dict, margin: float = 0.02, mae_margin: float = 0.01) -> bool:
-    """Print the rule's table per network, on the test frames both files scored; True when every network is admissible."""
-    for model, ref in reference["models"].items():
-        new = candidate["models"].get(model)
-        if new is None or new["seeds"] != ref["seeds"]:
-            sys.exit(f"--compare: {model} was not run with the same seeds in both files")
-    paths = [m for m in reference["models"] if m != "pilotnet"]
-    runs = [c for file in (reference, candidate) for model in paths for c in file["models"][model]["counts"]]
-    keys = sorted(set.intersection(*(set(c) for c in [*runs, candidate["prior"]])))
-    print(f"reference: {' '.join(reference['overrides']) or '(none)'}\ncandidate: {' '.join(candidate['overrides']) or '(none)'}")
-    print(f"scored against: {candidate['labels']}; {len(keys)} test images both scored "
-          f"(reference {len(reference['prior'])}, candidate {len(candidate['prior'])})")  # fmt: skip
-    prior = iou(candidate["prior"], keys)
-    print(f"mean-path prior: {prior:.4f}; margin {margin} IoU (PilotNet: {mae_margin} MAE)\n")
-    print("| network | reference mean | candidate mean | paired differences (seeds in order) | mean ± sd | standard error | "
-          "one-sided 95 % bound | worst seed | admissible |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |")  # fmt: skip
-    admissible_all = True
-    for model in reference["models"]:
-        ref, new = reference["models"][model], candidate["models"][model]
-        if model == "pilotnet":
-            frames = sorted(set.intersection(*(set(c) for c in [*ref["counts"], *new["counts"]])))
-            old_score, new_score = ([mae(c, frames) for c in row["counts"]] for row in (ref, new))
-            mean_d, sd, se, bound = one_sided([b - a for a, b in zip(old_score, new_score, strict=True)], -1)
-            worst, floor = max(new_score), mae(new["straight"], frames)
-            ok = bound < mae_margin and worst < floor
-            label, worst_text = f"pilotnet (MAE, {len(frames)} frames; straight ahead {floor:.4f})", f"{worst:.4f}"
-        else:
-            old_score, new_score = ([iou(c, keys) for c in row["counts"]] for row in (ref, new))
-            mean_d, sd, se, bound = one_sided([b - a for a, b in zip(old_score, new_score, strict=True)], +1)
-            worst = min(new_score)
-            ok = bound > -margin and worst > prior
-            label, worst_text = model, f"{worst:.4f}"
-        admissible_all &= ok
-        diffs = [b - a for a, b in zip(old_score, new_score, strict=True)]
-        print(f"| {label} | {statistics.mean(old_score):.4f} | {statistics.mean(new_score):.4f} | "
-              f"{', '.join(f'{d:+.3f}' for d in diffs)} | {mean_d:+.4f} ± {sd:.4f} | {se:.4f} | "
-              f"{bound:+.4f} | {worst_text} | {'yes' if ok else 'no'} |")  # fmt: skip
-    return admissible_all
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -249,14 +168,17 @@ def main() -> None:
     parser.add_argument("--mae-margin", type=float, default=0.01, help="non-inferiority margin in mean absolute error (PilotNet)")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides of the train stage, after --")
     args = parser.parse_args()
-    if args.compare:
-        reference, candidate = (json.loads(p.read_text()) for p in args.compare)
-        sys.exit(0 if compare(reference, candidate, args.margin, args.mae_margin) else 1)
-    if args.merge:
-        if len(args.merge) < 3:
-            parser.error("--merge OUT IN [IN ...]: at least two files to join")
-        args.merge[0].write_text(json.dumps(merge([json.loads(p.read_text()) for p in args.merge[1:]])) + "\n")
-        return
+    try:
+        if args.compare:
+            reference, candidate = (json.loads(p.read_text()) for p in args.compare)
+            sys.exit(0 if compare(reference, candidate, args.margin, args.mae_margin) else 1)
+        if args.merge:
+            if len(args.merge) < 3:
+                parser.error("--merge OUT IN [IN ...]: at least two files to join")
+            args.merge[0].write_text(json.dumps(merge([json.loads(p.read_text()) for p in args.merge[1:]])) + "\n")
+            return
+    except ValueError as e:
+        sys.exit(f"{'--compare' if args.compare else '--merge'}: {e}")
     if (args.runs_dir or args.steering_dir) and args.overrides:
         parser.error("--runs-dir scores runs made with the checkout's config: give no overrides with it")
     print(f"overrides: {' '.join(args.overrides) or '(none: the laptop preset)'}")

@@ -29,7 +29,7 @@ def test_the_grid_lists_every_registered_network_and_each_has_a_config():
 
 def test_each_pretraining_the_code_implements_has_a_config_and_no_other():
     """Validation reads the choices from conf/pretraining/ (without importing torch); the code implements them."""
-    from offroad_path.config import PRETRAININGS
+    from offroad_path.config.common import PRETRAININGS
     from offroad_path.training.pretrained import CHOICES
 
     assert sorted(PRETRAININGS()) == sorted(CHOICES)

@@ -1,4 +1,4 @@
-"""One source of values: conf/ holds every value, the schemas in config.py only types and rules."""
+"""One source of values: conf/ holds every value, the schemas in offroad_path/config/ only types and rules."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def test_the_schemas_hold_no_values():
         for key, f in leaf_fields(Config)
         if (f.default is not MISSING or f.default_factory is not dataclasses.MISSING) and key not in OPTIONAL_NODES
     ]
-    assert not valued, f"config.py gives these a value; put it in conf/ instead: {valued}"
+    assert not valued, f"the schemas give these a value; put it in conf/ instead: {valued}"
 
 
 @pytest.mark.parametrize(

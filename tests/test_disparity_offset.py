@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from offroad_path.config import OdometryConfig
+from offroad_path.config.labelling import OdometryConfig
 from offroad_path.label import offset_metrics
 from offroad_path.labelling.labeller import write_odometry
 from offroad_path.odometry.steps import StepResult

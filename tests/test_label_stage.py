@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from helpers import file_hashes, openblas_cores, without_vector_kernels
 
-from offroad_path.config import OdometryConfig
+from offroad_path.config.labelling import OdometryConfig
 from offroad_path.errors import InputError
 from offroad_path.label import label
 from offroad_path.labelling.compare import compare

@@ -118,7 +118,7 @@ def test_what_needs_stereo_refuses_a_mono_recording_in_one_line(compose_config, 
     occlusion = compose_config().label.occlusion
     with pytest.raises(InputError, match=r"has one camera .*: occlusion from stereo depth .* needs a stereo pair"):
         measured_depth(seq, 0, None, occlusion)
-    from offroad_path.config import OdometryConfig
+    from offroad_path.config.labelling import OdometryConfig
     from offroad_path.odometry.trajectory import run_odometry
 
     with pytest.raises(InputError, match="the stereo odometry and its disparity offset needs a stereo pair"):

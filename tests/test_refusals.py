@@ -171,6 +171,38 @@ def test_predict_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(trained, 
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]
 
 
+def test_ingest_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(drive, rig, raw_drive, tmp_path):
+    """Once an AttributeError traceback from the epipolar check; then checked by hand only."""
+    from raw_rig import write_bag
+
+    bag = write_bag(tmp_path / "drive_mcap", "mcap", raw_drive[:6], rig)
+    meta = json.loads((drive / "drive" / "meta.json").read_text())
+    out = tmp_path / "ingested" / "drive"
+    run = limited(65536, "offroad_path.ingest", f"ingest.bag={bag}", "ingest.topics.left=/stereo/left/image_raw",
+                  "ingest.topics.right=/stereo/right/image_raw", f"ingest.out_dir={out}", "mlflow.enabled=false",
+                  f"ingest.footprint.width_m={meta['vehicle_width_m']}", f"ingest.footprint.front_m={meta['footprint_front_m']}",
+                  f"ingest.footprint.rear_m={meta['footprint_rear_m']}", f"ingest.footprint.camera_height_m={meta['camera_height_m']}",
+                  f"ingest.footprint.camera_pitch_deg={meta['camera_pitch_deg']}", cwd=tmp_path)  # fmt: skip
+    assert run.returncode == 2, run.stderr[-1500:]
+    errors = [line for line in run.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and ".png" in errors[0] and "could not be written" in errors[0], run.stderr[-1500:]
+    assert "Traceback" not in run.stderr
+    assert not out.exists()
+    assert not (tmp_path / "ingested").exists() or not list((tmp_path / "ingested").iterdir())  # no partial or temporary folder
+
+
+def test_inspect_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(labelled_drive, drive, tmp_path):
+    """Rerun's writer fails in a thread of its own: once a RuntimeError traceback, then not tested."""
+    out = tmp_path / "inspected"
+    args = (str(labelled_drive), "--recording", str(drive), "--out", str(out))
+    run = limited(100_000, "offroad_path.labelling.inspect", *args, cwd=tmp_path)
+    assert run.returncode == 2, run.stderr[-1500:]
+    errors = [line for line in run.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and errors[0].startswith(f"error: {out / 'drive.rrd'}: the recording could not be written"), run.stderr[-1500:]
+    assert "Traceback" not in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no output, no temporary folder
+
+
 def test_a_video_that_does_not_hold_every_frame_is_an_error(tmp_path):
     script = (
         "import numpy as np\nfrom offroad_path.utils.media import VideoFile\n"

@@ -1,17 +1,13 @@
-"""The rule for changes that alter results (benchmarks/seed_spread.py --compare): non-inferiority by a
+"""The rule for changes that alter results (statistics.noninferiority, benchmarks/seed_spread.py --compare): non-inferiority by a
 one-sided 95 % bound of the paired difference over seeds, and no seed collapsing, on hand-made runs."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 
 import pytest
-from helpers import ROOT
 
-spec = importlib.util.spec_from_file_location("seed_spread", ROOT / "benchmarks" / "seed_spread.py")
-seed_spread = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(seed_spread)
+from offroad_path.statistics import noninferiority as seed_spread
 
 SEEDS = [0, 1, 2, 3, 4]
 T_95_4 = 2.131847  # Student's t, 95th percentile, 4 degrees of freedom
@@ -64,5 +60,5 @@ def test_merge_joins_seeds_in_order_and_refuses_a_seed_twice(tmp_path):
                 row[key] = [row[key][i] for i in keep]
         parts.append(part)
     assert seed_spread.merge(parts) == whole
-    with pytest.raises(SystemExit, match="twice"):
+    with pytest.raises(ValueError, match="twice"):
         seed_spread.merge([parts[0], parts[0]])

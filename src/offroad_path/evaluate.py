@@ -75,6 +75,7 @@ def evaluate(cfg: DictConfig) -> list[Record]:
     test = every.subset(every.main)  # the main test set: every figure but the stress sets'
     stress = StressSets(lambda samples: test_bootstrap(evaluate_cfg, samples, cfg.split.block_m))
     stress.score(every)
+    del every  # the stress sets are scored: only the main set's maps stay in memory from here
     bootstrap = test_bootstrap(evaluate_cfg, test.samples, cfg.split.block_m)
     uncertainty, steering = Uncertainty(bootstrap, cfg.split.block_m), SteeringFromPaths(evaluate_cfg, bootstrap)
     results = ResultsTable(uncertainty)

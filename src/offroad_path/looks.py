@@ -1,5 +1,5 @@
 """The world's look axes and the names of their values: what `world.appearance.held_out` and
-`world.appearance.weights` may name. The settings' rules check names against these (config.py); the
+`world.appearance.weights` may name. The settings' rules check names against these (offroad_path/config/); the
 renderer gives each name its colours (offroad_path.world.appearance, whose tables list exactly these,
 in this order: a world's look is drawn by position). Kept apart from the renderer's tables so that a
 stage that only validates its settings does not depend on them."""

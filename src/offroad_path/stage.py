@@ -30,7 +30,8 @@ from hydra.errors import HydraException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from offroad_path.config import CONF_DIR, register_configs, validate_config
+from offroad_path.config import register_configs, validate_config
+from offroad_path.config.common import CONF_DIR
 from offroad_path.errors import EXIT_BAD_INPUT, InputError, clear_errors, missing_extra, one_line
 from offroad_path.utils.atomic import remove_unfinished
 from offroad_path.utils.outputs import Outputs, check_outputs, claimed, release_locks

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from offroad_path.config import SplitConfig
+    from offroad_path.config.labelling import SplitConfig
 
 log = logging.getLogger(__name__)
 STRATEGIES = ("grouped", "stretch", "random")

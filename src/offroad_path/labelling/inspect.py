@@ -179,7 +179,8 @@ def inspect(labels: Path, recording: Path | None, out: Path, every: int = 4) -> 
             try:
                 log_sequence(rr, tmp / f"{name}.rrd", it)
             except RuntimeError as e:  # rerun's writer: a full disk, a folder that may not be written
-                raise OSError(errno.EIO, f"the recording could not be written ({one_line(e)})", str(tmp / f"{name}.rrd")) from e
+                # named where it was to go: the temporary folder is gone with the error
+                raise OSError(errno.EIO, f"the recording could not be written ({one_line(e)})", str(out / f"{name}.rrd")) from e
             if it.footprint is not None and not seq.mono:  # the check compares stereo depth with the footprint
                 checks[name] = it.check.verdict(it.footprint.camera_height_m)
                 checks[name]["curve_depth"], checks[name]["curve_ratio"] = ratio_curve(it.check, np.arange(2.0, 16.0, 1.0))

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.config import OdometryConfig
+from offroad_path.config.labelling import OdometryConfig
 from offroad_path.errors import InputError
 from offroad_path.geometry.path import distance_along
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, encode_disparity, sgbm

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offroad_path.config import OdometryConfig
+from offroad_path.config.labelling import OdometryConfig
 from offroad_path.geometry.path import path_length
 from offroad_path.odometry.frame_to_frame import FrameToFrameOdometry
 from offroad_path.odometry.steps import StepResult

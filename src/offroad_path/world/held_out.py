@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offroad_path.config import TestWorldsConfig, WorldConfig
+from offroad_path.config.world import TestWorldsConfig, WorldConfig
 from offroad_path.sequence.meta import MAIN
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.appearance import AXES, training_values

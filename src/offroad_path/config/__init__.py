@@ -1,0 +1,113 @@
+"""Typed schemas of the Hydra configuration, registered in Hydra's ConfigStore.
+
+The values live in the YAML files under `conf/`, once; these schemas hold only types and rules
+(`setting(positive())`: checked by `validate_config` before a stage works). A misspelt key or a
+value of the wrong type fails at composition, a value a rule refuses before any work, each with
+an error naming the key. Library code reads its settings from a composed config
+(`load_config()`), never from defaults of its own.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+from hydra import compose, initialize_config_dir
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING, DictConfig, OmegaConf
+
+from offroad_path.config.common import CONF_DIR, THREADS
+from offroad_path.config.evaluation import DriveConfig, EvaluateConfig
+from offroad_path.config.labelling import IngestConfig, LabelConfig, SplitConfig
+from offroad_path.config.serving import ExportConfig, MlflowConfig, PredictConfig
+from offroad_path.config.training import (
+    DataConfig,
+    ModelConfig,
+    PostprocessConfig,
+    PretrainConfig,
+    PretrainingConfig,
+    SteeringConfig,
+    TrainConfig,
+    TrainerConfig,
+)
+from offroad_path.config.world import PathsConfig, RigConfig, SynthesizeConfig, WorldConfig
+from offroad_path.utils.rules import setting, validate
+
+
+@dataclass
+class Config:
+    paths: PathsConfig = field(default_factory=PathsConfig)
+    world: WorldConfig = field(default_factory=WorldConfig)
+    synthesize: SynthesizeConfig = field(default_factory=SynthesizeConfig)
+    ingest: IngestConfig = field(default_factory=IngestConfig)
+    label: LabelConfig = field(default_factory=LabelConfig)
+    split: SplitConfig = field(default_factory=SplitConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    pretraining: PretrainingConfig = field(default_factory=PretrainingConfig)
+    trainer: TrainerConfig = field(default_factory=TrainerConfig)
+    # Lightning callbacks and logger, instantiated as written (conf/callbacks, conf/logger): free-form,
+    # so that a user can add any callback.
+    callbacks: Any = MISSING
+    logger: Any = MISSING
+    train: TrainConfig = field(default_factory=TrainConfig)
+    pretrain: PretrainConfig = field(default_factory=PretrainConfig)
+    postprocess: PostprocessConfig = field(default_factory=PostprocessConfig)
+    evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
+    steering: SteeringConfig = field(default_factory=SteeringConfig)
+    drive: DriveConfig = field(default_factory=DriveConfig)
+    predict: PredictConfig = field(default_factory=PredictConfig)
+    export: ExportConfig = field(default_factory=ExportConfig)
+    mlflow: MlflowConfig = field(default_factory=MlflowConfig)
+    experiment_name: str = MISSING
+    seed: int = MISSING  # the training seed (pretrain, train, train_steering)
+    resume: bool = MISSING  # continue an interrupted training run from its last.ckpt (in .resume/ beside out_dir); false: start afresh
+    optimized_metric: str | None = MISSING  # the stage's metric a Hydra sweeper optimises (hparams_search)
+    threads: str = setting(THREADS)  # torch, OpenCV and OpenMP threads of a stage's process: all, free or a number
+
+
+def validate_config(cfg: DictConfig, groups: tuple[str, ...] | None = None) -> None:
+    """Every value with a rule in these schemas (only those of `groups` and the top-level values,
+    when given), checked before a stage works (ConfigValueError)."""
+    validate(cfg, Config, only=groups)
+
+
+def run_grid(architectures: list[str], pretrainings: list[str]) -> list[str]:
+    """Every architecture with every pretraining: the runs the pipeline trains and scores."""
+    return [f"{a}-{p}" for a in architectures for p in pretrainings]
+
+
+def join_path(root: str, *parts: str) -> str:
+    """`root`/`parts`, normalised (`./data` is `data`, `~` expanded): the paths group's resolver, so
+    that the default root `.` gives the same paths, and so the same DVC outputs, as before it existed."""
+    return os.path.normpath(os.path.join(os.path.expanduser(str(root)), *map(str, parts)))
+
+
+def steering_folder(slip: bool, target: str = "angle") -> str:
+    """The folder name of a PilotNet run: `steering`, `steering_slip` for the slip targets (the
+    stage train_steering_slip), `steering_curvature` for the curvature target, so that none
+    replaces another's outputs by default."""
+    return "steering" + ("_curvature" if target == "curvature" else "") + ("_slip" if slip else "")
+
+
+def steering_stage(slip: bool, target: str = "angle") -> str:
+    """The stage a PilotNet run is (its outputs' markers, its MLflow tag): train_steering, train_steering_slip, ..."""
+    return f"train_{steering_folder(slip, target)}"
+
+
+def register_configs() -> None:
+    OmegaConf.register_new_resolver("run_grid", run_grid, replace=True)
+    OmegaConf.register_new_resolver("join", join_path, replace=True)
+    OmegaConf.register_new_resolver("steering_folder", steering_folder, replace=True)
+    cs = ConfigStore.instance()
+    cs.store(name="config_schema", node=Config)
+    cs.store(group="world/rig", name="rig_schema", node=RigConfig, package="world.rig")
+
+
+def load_config(*overrides: str) -> DictConfig:
+    """The project's config composed exactly as the stages compose it (for notebooks, scripts and
+    tests), e.g. `load_config("experiment=paper").postprocess`."""
+    register_configs()
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        return compose("config", overrides=list(overrides))

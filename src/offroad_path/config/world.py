@@ -1,0 +1,150 @@
+"""Schemas of the world and its rendering: paths, the rig, the vehicle, slip, appearance, test worlds (synthesize)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import MISSING
+
+from offroad_path.config.common import FINITE, IMAGE_SIZE, PITCH, registry
+from offroad_path.looks import axis_values
+from offroad_path.utils.rules import Rule, at_least, between, each, one_of, positive, setting
+
+
+@dataclass
+class PathsConfig:
+    """Where the stages read and write (conf/paths): every stage's *_dir and *_path is made from these."""
+
+    root: str = MISSING
+    data_dir: str = MISSING
+    metrics_dir: str = MISSING
+    recordings_dir: str = MISSING
+    logs_dir: str = MISSING
+    exports_dir: str = MISSING
+    predictions_dir: str = MISSING
+
+
+@dataclass
+class RigConfig:
+    name: str = MISSING
+    baseline_m: float = MISSING
+
+
+@dataclass
+class VehicleConfig:
+    width_m: float = setting(positive())
+    length_m: float = setting(positive())
+    wheelbase_m: float = setting(positive())
+    track_m: float = setting(positive())
+    camera_height_m: float = setting(positive())
+    camera_forward_m: float = setting(FINITE)  # camera ahead of the body centre
+    camera_pitch_deg: float = setting(PITCH)  # optical axis tilted down
+    max_steering_deg: float = setting(between(0, 90, low_open=True, high_open=True))
+
+
+@dataclass
+class SlipConfig:
+    """Traction below the kinematic bicycle model's (offroad_path.world.slip): off by default."""
+
+    enabled: bool = MISSING  # synthesize: the recorded steering is the input that made the motion under slip
+    factors: dict[str, float] = setting(each(positive()))  # yaw-rate factor per surface class name; 1 where absent
+    # The factor's jitter is drawn once per square patch this wide (a grid over the whole world: smaller ones do not fit memory).
+    patch_m: float = setting(at_least(0.5))
+    jitter: float = setting(between(0, 1, high_open=True))  # patch factors in [1 - jitter, 1 + jitter] times the surface's
+    noise: float = setting(at_least(0))  # per-step (per-frame) noise of the factor, a standard deviation
+
+
+def _valid_looks(combinations: Any) -> bool:
+    axes = axis_values()
+    return all(c and all(axes.get(k) and v in axes[k] for k, v in c.items()) for c in combinations)
+
+
+LOOKS = {
+    "rule": Rule(
+        _valid_looks,
+        "must list combinations such as {track: mud, season: autumn} of the axes track, season, light, vegetation",
+    )
+}
+
+
+def _valid_weights(weights: Any) -> bool:
+    axes = axis_values()
+    return all(
+        axis in axes
+        and set(values) <= set(axes[axis])
+        and all(isinstance(w, int | float) and w >= 0 for w in values.values())
+        and sum(values.values()) > 0
+        for axis, values in weights.items()
+    )
+
+
+WEIGHTS = {
+    "rule": Rule(
+        _valid_weights,
+        "must map axes (track, season, light, vegetation) to {value: weight >= 0} with a positive weight on each axis",
+    )
+}
+
+
+@dataclass
+class AppearanceConfig:
+    """Each world's look drawn from a stream of its own (offroad_path.world.appearance)."""
+
+    enabled: bool = MISSING  # false: the single look of the worlds before issue 44, byte for byte
+    # Looks no training drive shows; every other test world is drawn from them (the held-out-appearance test set).
+    held_out: list[dict[str, str]] = setting(LOOKS)
+    # The training distribution: per axis, each value's weight (absent or 0: no training drive shows it); an
+    # axis not listed draws its values alike. The stress set `outside_look` draws from every value alike.
+    weights: dict[str, Any] = setting(WEIGHTS)  # Any: OmegaConf cannot merge a typed dict of dicts
+
+
+@dataclass
+class WorldConfig:
+    """One rendered sequence's generator settings; per-sequence variation is drawn around these."""
+
+    rig: RigConfig = field(default_factory=RigConfig)
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    frames: int = setting(at_least(2))
+    fps: float = setting(positive())
+    speed_min_mps: float = setting(positive())
+    speed_max_mps: float = setting(positive())
+    width: int = setting(IMAGE_SIZE)
+    height: int = setting(IMAGE_SIZE)
+    hfov_deg: float = setting(between(1, 179))
+    max_distance_m: float = MISSING
+    hill_height_m: float = MISSING
+    bump_height_m: float = MISSING
+    max_curvature: float = MISSING  # 1/m; the peak of a drive, reached once or twice per sequence
+    track_width_m: float = MISSING
+    trees_per_hectare: float = MISSING
+    bushes_per_hectare: float = MISSING
+    obstacles_per_100m: float = MISSING
+    puddles_per_100m: float = MISSING
+    forks_per_100m: float = MISSING
+    offtrack_per_100m: float = MISSING
+    paved_fraction: float = MISSING
+    sun_elevation_deg: tuple[float, float] = MISSING
+    density_jitter: float = MISSING  # per-sequence density factor drawn in [1 - j, 1 + j]
+    slip: SlipConfig = field(default_factory=SlipConfig)
+    appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
+
+
+@dataclass
+class TestWorldsConfig:
+    min_blocks: int = setting(at_least(0))  # the main test set's blocks; 0: no test worlds (the split takes test blocks from the drives)
+    # Stress sets (offroad_path.world.held_out): condition groups (offroad_path.world.groups.GROUPS), each reported on its own.
+    stress_sets: list[str] = setting(each(one_of(registry("world.groups", "GROUP_KEYS"))))
+    per_stress: int = setting(at_least(0))  # worlds per stress set
+    block_m: float = setting(positive())
+    horizon_m: float = MISSING  # the last metres of a drive, which get no label (label.distance_m, whose rule checks it)
+    max_candidates: int = setting(at_least(1))
+
+
+@dataclass
+class SynthesizeConfig:
+    sequences: int = setting(at_least(1))
+    seed: int = MISSING
+    test_worlds: TestWorldsConfig = field(default_factory=TestWorldsConfig)
+    workers: int = setting(at_least(0))  # 0: one per CPU core
+    out_dir: str = MISSING
