@@ -246,4 +246,4 @@ def test_several_seeds_pool_their_counts_and_show_their_spread(compose_config, s
     ious = [s.iou for s in per_seed]
     assert (fcn["seed_mean"], fcn["seed_sd"]) == pytest.approx((np.mean(ious), np.std(ious, ddof=1)), abs=1e-6)
     assert metrics["uncertainty"]["unet-none.raw"]["seed_sd"] == 0 and metrics["uncertainty"]["test_set"]["seeds"] == 2
-    assert "| IoU, raw [95 % interval] | raw, over seeds |" in (tmp_path / "evaluation" / "results.md").read_text()
+    assert "| IoU [95 % interval] | IoU over seeds, mean ± sd |" in (tmp_path / "evaluation" / "results.md").read_text()

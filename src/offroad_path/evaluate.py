@@ -21,13 +21,13 @@ from offroad_path.data.labels import label_run_folders
 from offroad_path.data.manifest import manifest_folders
 from offroad_path.evaluation.tables import split_run_name
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.statistics.scores import Record
 from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.progress import Progress
 from offroad_path.utils.tracking import stage_run, tracking_uri
 
 if TYPE_CHECKING:
     from offroad_path.evaluation.report import Section
+    from offroad_path.statistics.scores import Record
 
 log = logging.getLogger("offroad_path.evaluate")
 

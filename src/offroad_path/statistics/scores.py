@@ -12,20 +12,24 @@ table, interval, metrics file and training log takes its scores from SCORES
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
-import torch
+
+if TYPE_CHECKING:
+    import torch
 
 TP, FP, TN, FN = range(4)  # the columns of a count array (evaluation.metrics.counts)
 
-Array = TypeVar("Array", np.ndarray, torch.Tensor)
+Array = TypeVar("Array", np.ndarray, "torch.Tensor")
 
 
 def ratio(a: Array, b: Array) -> Array:
     """a / b, nan where b is 0. Integer torch counts divide in float32, as torchmetrics does."""
-    if isinstance(a, torch.Tensor):
+    torch = sys.modules.get("torch")  # a tensor means torch is imported; the tables need not import it (a stage's --help)
+    if torch is not None and isinstance(a, torch.Tensor):
         return torch.where(b > 0, a / torch.where(b > 0, b, 1), torch.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(b > 0, a / np.where(b > 0, b, 1), np.nan)
