@@ -1,3 +1,5 @@
+"""Frame selection (labelling.frame_selection): which frames start a label segment, on hand-made trajectories."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,3 +1,6 @@
+"""labelling.compare: two label runs of the same recordings, frame by frame (mean and minimum IoU,
+frames only one labelled), and its command."""
+
 from __future__ import annotations
 
 import subprocess
