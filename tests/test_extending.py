@@ -42,3 +42,31 @@ def test_a_score_added_to_the_registry_reaches_every_table_and_metrics_file(comp
     assert "| Dice [95 % interval] |" in report  # the other scores' intervals
     assert "| baseline | accuracy | precision | recall | IoU | Dice |" in report
     assert (tmp_path / "evaluation" / "results.csv").read_text().splitlines()[0].endswith(",iou,dice,mean_image_iou")
+
+
+def test_a_look_value_added_to_the_names_and_the_table_is_drawn_and_rendered(compose_config, monkeypatch):
+    """A world look value: its name in looks.py and its colours in world/appearance.py's table, then a weight."""
+    from offroad_path.config import validate_config
+    from offroad_path.looks import AXIS_VALUES
+    from offroad_path.utils.rules import ConfigValueError
+    from offroad_path.world.appearance import TRACKS
+    from offroad_path.world.classes import DIRT
+    from offroad_path.world.record import camera_for
+    from offroad_path.world.render import render_view
+    from offroad_path.world.scene import build_world
+
+    sand = (0.76, 0.70, 0.50)
+    only_sand = [f"world.appearance.weights.track.{name}=0.0" for name in AXIS_VALUES["track"]]
+    small = ("world.width=64", "world.height=36", "world.frames=20", "world.max_distance_m=40")
+    with pytest.raises(ConfigValueError, match="sand"):  # a name the renderer does not know is refused
+        validate_config(compose_config(*small, *only_sand, "+world.appearance.weights.track.sand=1.0"))
+    monkeypatch.setitem(AXIS_VALUES, "track", (*AXIS_VALUES["track"], "sand"))
+    monkeypatch.setitem(TRACKS, "sand", {"albedo": sand, "contrast": 0.2, "ruts": None})
+    cfg = compose_config(*small, *only_sand, "+world.appearance.weights.track.sand=1.0")
+    validate_config(cfg)
+    world = build_world(cfg.world, 3)
+    assert world.look.track == "sand" and not world.look.outside
+    ratio = world.palette[DIRT] / np.array(sand)
+    assert np.allclose(ratio, ratio[0]) and 0.85 <= ratio[0] <= 1.15  # the table's colour, jittered in brightness only
+    view = render_view(world, camera_for(cfg.world), world.poses[3], cfg.world.max_distance_m)
+    assert view.image.shape == (36, 64, 3) and (view.semantic == DIRT).any()  # the sand track is in view
