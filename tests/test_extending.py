@@ -4,6 +4,7 @@ statistics/scores.py (tests/test_architectures.py does the same for a network)."
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -70,3 +71,92 @@ def test_a_look_value_added_to_the_names_and_the_table_is_drawn_and_rendered(com
     assert np.allclose(ratio, ratio[0]) and 0.85 <= ratio[0] <= 1.15  # the table's colour, jittered in brightness only
     view = render_view(world, camera_for(cfg.world), world.poses[3], cfg.world.max_distance_m)
     assert view.image.shape == (36, 64, 3) and (view.semantic == DIRT).any()  # the sand track is in view
+
+
+HELLO_STAGE = '''"""Stage `hello`: a stand-in stage (tests/test_extending.py) that writes a greeting."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from offroad_path.stage import hydra_stage, reads
+from offroad_path.utils.outputs import Outputs
+
+
+def outputs(cfg: DictConfig) -> Outputs:
+    return Outputs("hello", files={"hello.out_path": cfg.hello.out_path})
+
+
+@reads("hello", writes=outputs)
+def hello(cfg: DictConfig) -> None:
+    Path(cfg.hello.out_path).write_text(cfg.hello.greeting * cfg.hello.times + "\\n")
+
+
+main = hydra_stage(hello)
+
+if __name__ == "__main__":
+    main()
+'''
+HELLO_SCHEMA = '''"""The stand-in stage's schema."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from omegaconf import MISSING
+
+from offroad_path.utils.rules import at_least, setting
+
+
+@dataclass
+class HelloConfig:
+    greeting: str = MISSING
+    times: int = setting(at_least(1))
+    out_path: str = MISSING
+'''
+
+
+def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc_deps(tmp_path):
+    """A stage: its module with @reads, its conf group, its schema and Config field, a defaults line and a dvc.yaml stage."""
+    import shutil
+    import subprocess
+    import sys
+
+    import yaml
+    from helpers import ROOT
+
+    for item in ("src", "conf", "dvc.yaml"):
+        (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, tmp_path / item)
+    package = tmp_path / "src" / "offroad_path"
+    (package / "hello.py").write_text(HELLO_STAGE)
+    (package / "config" / "hello.py").write_text(HELLO_SCHEMA)
+    init = (package / "config" / "__init__.py").read_text()
+    schema = "\nfrom offroad_path.config.hello import HelloConfig\n\n\n@dataclass\nclass Config:\n"
+    init = init.replace("\n\n@dataclass\nclass Config:\n", schema)
+    field_line = "    hello: HelloConfig = field(default_factory=HelloConfig)\n    mlflow: MlflowConfig"
+    (package / "config" / "__init__.py").write_text(init.replace("    mlflow: MlflowConfig", field_line))
+    (tmp_path / "conf" / "hello").mkdir()
+    (tmp_path / "conf" / "hello" / "default.yaml").write_text("greeting: hello\ntimes: 2\nout_path: ${paths.data_dir}/hello.txt\n")
+    primary = (tmp_path / "conf" / "config.yaml").read_text()
+    (tmp_path / "conf" / "config.yaml").write_text(primary.replace("  - mlflow: default\n", "  - mlflow: default\n  - hello: default\n"))
+    stage = "  hello:\n    cmd: python -m offroad_path.hello\n    deps:\n      - src/offroad_path/hello.py\n"  # dvc_deps writes the rest
+    stage += "    outs:\n      - data/hello.txt\n"
+    pipeline = (tmp_path / "dvc.yaml").read_text()
+    (tmp_path / "dvc.yaml").write_text(pipeline.replace("\nplots:\n", f"\n{stage}\nplots:\n", 1))
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        env = {**os.environ, "PYTHONPATH": str(tmp_path / "src")}
+        return subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=tmp_path, env=env)
+
+    done = run("-m", "offroad_path.hello")
+    assert done.returncode == 0, done.stderr[-1500:]
+    assert (tmp_path / "data" / "hello.txt").read_text() == "hellohello\n"
+    refused = run("-m", "offroad_path.hello", "hello.times=0")
+    assert refused.returncode == 2 and "hello.times" in refused.stderr, refused.stderr[-800:]
+    listed = run("-c", "from offroad_path.stage import stage_modules; print(stage_modules())")
+    assert "'hello'" in listed.stdout, listed.stderr[-800:]
+    assert run("-m", "offroad_path.utils.dvc_deps").returncode == 0
+    deps = yaml.safe_load((tmp_path / "dvc.yaml").read_text())["stages"]["hello"]["deps"]
+    assert "src/offroad_path/hello.py" in deps and "src/offroad_path/stage.py" in deps
