@@ -39,6 +39,19 @@ def sequence_seed(master_seed: int, index: int) -> int:
     return int(np.random.SeedSequence([master_seed, index]).generate_state(1)[0])
 
 
+def footprint_meta(vehicle) -> dict[str, float]:
+    """meta.json's footprint entries (meta_keys.FOOTPRINT's spelling) from the vehicle config, in the order
+    meta.json has always held them; the extent is along the camera's forward axis, from the camera centre."""
+    footprint = {
+        "camera_height_m": vehicle.camera_height_m,
+        "camera_pitch_deg": vehicle.camera_pitch_deg,
+        "width_m": vehicle.width_m,
+        "front_m": vehicle.length_m / 2 - vehicle.camera_forward_m,
+        "rear_m": -(vehicle.length_m / 2 + vehicle.camera_forward_m),
+    }
+    return {meta_keys.FOOTPRINT[key]: value for key, value in footprint.items()}
+
+
 def camera_for(cfg: WorldConfig) -> PinholeCamera:
     return PinholeCamera.from_fov(cfg.width, cfg.height, cfg.hfov_deg)
 
@@ -95,12 +108,7 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, test_set: str | 
         "width": cfg.width,
         "height": cfg.height,
         "hfov_deg": cfg.hfov_deg,
-        "camera_height_m": vehicle.camera_height_m,
-        "camera_pitch_deg": vehicle.camera_pitch_deg,
-        "vehicle_width_m": vehicle.width_m,
-        # Footprint extent along the camera's forward axis, relative to the camera centre.
-        "footprint_front_m": vehicle.length_m / 2 - vehicle.camera_forward_m,
-        "footprint_rear_m": -(vehicle.length_m / 2 + vehicle.camera_forward_m),
+        **footprint_meta(vehicle),
         "vehicle": OmegaConf.to_container(vehicle) if OmegaConf.is_config(vehicle) else asdict(vehicle),
         "steering": "bicycle-model wheel angle over max_steering_deg, in [-1, 1], positive turns right",
         "depth": "z of the left camera in millimetres (uint16), 0 for sky, 65535 for 65.535 m or farther",
