@@ -16,8 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from helpers import openblas_cores, without_vector_kernels
+from offroad_path.utils.kernels import openblas_cores, without_vector_kernels
 
 
 def main() -> None:

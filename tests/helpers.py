@@ -191,25 +191,6 @@ def saved_epochs(out: Path) -> int:
     return 0
 
 
-def without_vector_kernels() -> dict[str, str]:
-    """An environment in which OpenCV and NumPy use none of their CPU-specific vector kernels (the
-    dispatched ones: SSE4 and up for OpenCV, AVX-512 among them, X86_V3 and up for NumPy) and
-    OpenBLAS runs its oldest x86-64 kernels."""
-    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-
-    dispatched = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
-    env = {"OPENCV_CPU_DISABLE": "SSE4.1,SSE4.2,POPCNT,AVX,FP16,AVX2,FMA3,AVX512-SKX", "OPENBLAS_CORETYPE": "Prescott"}
-    return env | ({"NPY_DISABLE_CPU_FEATURES": " ".join(dispatched)} if dispatched else {})
-
-
-def openblas_cores() -> list[str]:
-    """OpenBLAS kernel sets this CPU can run (OPENBLAS_CORETYPE): NumPy's matmul, dot and linalg
-    take the newest by default (SkylakeX here, Haswell on an AVX2 machine), and each rounds differently."""
-    flags = set(Path("/proc/cpuinfo").read_text().split()) if Path("/proc/cpuinfo").is_file() else set()
-    return [core for core, needs in (("Prescott", "sse3"), ("Nehalem", "sse4_2"), ("Sandybridge", "avx"), ("Haswell", "avx2"),
-            ("SkylakeX", "avx512f")) if needs in flags or (needs == "sse3" and "pni" in flags)]  # fmt: skip
-
-
 def file_hashes(folder: Path) -> dict[str, str]:
     """sha256 of every file under folder, by its path below it."""
     return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}

@@ -26,13 +26,13 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.geometry.exact import pinned_blas
 from offroad_path.labelling import shards
 from offroad_path.labelling.labeller import check_inputs, label_job
 from offroad_path.odometry.steps import FALLBACKS
 from offroad_path.sequence.reader import find_sequences, open_sequence, sequence_names
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+from offroad_path.utils.kernels import pinned_blas
 from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.parallel import map_processes
 from offroad_path.utils.rules import ConfigValueError
