@@ -8,6 +8,7 @@ from math import nan
 
 from offroad_path.evaluation.tables import (
     EVERY_SCRATCH_VS_PRIOR,
+    PP_KEY,
     baseline_name,
     baseline_row,
     comparison_title,
@@ -36,7 +37,6 @@ PAPER = {
     ("unet", "none", "yes"): (0.95, 0.77),
     ("unet", "segmentation", "no"): (0.93, 0.69),
 }
-PP_KEYS = {"no": "raw", "yes": "postprocessed"}
 
 
 def interval(entry: dict | None, key: str) -> Interval | None:
@@ -63,7 +63,7 @@ def results_table_markdown(m: dict, heading: str = "\n## Results (Table 5.1 layo
     ]
     for run in runs:
         model, pretraining = split_run_name(run)
-        for pp, key in PP_KEYS.items():
+        for pp, key in PP_KEY.items():
             r, entry = m[run][key], u.get(f"{run}.{key}")
             found = interval(entry, "iou")
             cells = [found.text() if name == "iou" and found else fmt(nan if r[name] is None else r[name]) for name in SCORES]

@@ -25,7 +25,6 @@ from offroad_path.utils.atomic import atomic_directory, write_text_atomic
 
 log = logging.getLogger(__name__)
 POSTPROCESSING = ("no", "yes")
-PP_KEY = {"no": "raw", "yes": "postprocessed"}  # their names in metrics.json and MLflow
 
 
 @dataclass

@@ -23,9 +23,9 @@ from offroad_path.evaluation.rendering import (
     results_table_markdown,
     temporal_markdown,
 )
-from offroad_path.evaluation.report import POSTPROCESSING, PP_KEY, TestSet
+from offroad_path.evaluation.report import POSTPROCESSING, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
-from offroad_path.evaluation.tables import markdown_table, method_title, network_name, result_row, split_run_name
+from offroad_path.evaluation.tables import PP_KEY, markdown_table, method_title, network_name, result_row, split_run_name
 from offroad_path.evaluation.temporal import TemporalRow, score_temporal
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, Uncertainty
 from offroad_path.statistics.bootstrap import Draws, Interval, mean

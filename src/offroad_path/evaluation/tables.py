@@ -12,6 +12,7 @@ from dataclasses import fields
 
 from offroad_path.statistics.scores import SCORES, TITLES, Record
 
+PP_KEY = {"no": "raw", "yes": "postprocessed"}  # post-processing "no"/"yes": their names in metrics.json and MLflow
 # Column titles of the registry-made tables where a column's name is not its title (a score's: TITLES).
 COLUMN_TITLES = {"postprocessing": "post-processing", "mean_image_iou": "per-image mean IoU"}
 

@@ -21,8 +21,8 @@ from offroad_path.data.splitting import block_of
 from offroad_path.errors import InputError
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.rendering import comparisons_markdown
-from offroad_path.evaluation.report import PP_KEY, TestSet
-from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR, method_title, split_run_name
+from offroad_path.evaluation.report import TestSet
+from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR, PP_KEY, method_title, split_run_name
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.statistics.scores import SCORES, TITLES, Score, iou
 
