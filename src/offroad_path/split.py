@@ -27,14 +27,15 @@ log = logging.getLogger("offroad_path.split")
 
 def labelled_frames(labels_dir: Path) -> tuple[list[Frame], dict[tuple[str, int], Sample]]:
     """Every labelled f0 under labels_dir, with its position along the path, whether it comes from
-    a held-out test world, and its sample row."""
+    a held-out world (and whether that is a development world), and its sample row."""
     frames, samples = [], {}
     for run in read_label_run(labels_dir):
         name, seq, travelled = run.name, run.sequence, run.distance()
         held_out = meta.held_out(seq.meta, seq.root / "meta.json")
+        development = held_out and meta.test_set(seq.meta) == meta.DEVELOPMENT
         for label in run.labels():
             f0 = int(label.stem)
-            frames.append(Frame(name, f0, float(travelled[f0]), held_out))
+            frames.append(Frame(name, f0, float(travelled[f0]), held_out, development))
             semantic = str(seq.semantic[f0]) if seq.semantic is not None else ""
             samples[(name, f0)] = Sample(
                 name,
@@ -73,7 +74,7 @@ def split(cfg: DictConfig) -> dict:
                     rows.append(Sample(**{**sample.__dict__, "mirrored": True}))
             write_manifest(tmp / f"{name}.csv", rows)
             counts[name] = len(rows)
-        worlds = sorted({f.sequence for f in frames if f.held_out})
+        worlds = sorted({f.sequence for f in frames if f.held_out and not f.development})
         test_blocks = len({block_of(f.sequence, f.travelled_m, split_cfg.block_m) for f in parts["test"]})
         summary = {
             "frames": len(frames),
@@ -82,6 +83,7 @@ def split(cfg: DictConfig) -> dict:
             "strategy": split_cfg.strategy,
             "mirror": split_cfg.mirror,
             "test_worlds": worlds,
+            "development_worlds": sorted({f.sequence for f in frames if f.development}),
             "test_blocks": test_blocks,
             "data_root": data_root(listed),
         }

@@ -40,12 +40,15 @@ class ModelConfig:
     name: str = setting(one_of(_model_names))
     width: float = setting(positive())  # channel multiplier: 1 is the original network
     lr: float = setting(positive())
-    # The rate times lr_gamma at each milestone, a fraction of the run's SGD iterations (training.task.sgd_with_milestones)
+    optimizer: str = setting(one_of(("sgd", "adamw")))  # sgd: the paper's (with momentum); adamw: the laptop recipe's
+    lr_schedule: str = setting(one_of(("step", "cosine")))  # step: times lr_gamma at each milestone; cosine: annealed to 0
+    # Milestones: fractions of the run's iterations (training.task.optimizer_with_schedule)
     lr_milestones: list[float] = setting(each(between(0, 1, low_open=True, high_open=True)))
     lr_gamma: float = setting(between(0, 1, low_open=True))
     lr_warmup: float = setting(between(0, 1, high_open=True))  # the rate ramps up from 0 over this fraction of the iterations
-    momentum: float = setting(between(0, 1, high_open=True))
+    momentum: float = setting(between(0, 1, high_open=True))  # SGD's
     weight_decay: float = setting(at_least(0))
+    dice_weight: float = setting(at_least(0))  # a soft Dice loss term beside the cross-entropy (0: cross-entropy alone, the paper's)
     imagenet_weights: str = MISSING  # torchvision VGG16(-BN) file that pretraining=imagenet reads for this network
     channels_last: bool = MISSING  # the memory format train.channels_last takes by default (measured per network)
     paper: PaperTrainingConfig | None = None  # absent for a network the paper did not train
@@ -74,6 +77,7 @@ class TrainerConfig:
     precision: str = MISSING
     deterministic: bool = MISSING
     log_every_n_steps: int = setting(at_least(1))
+    val_check_interval: float = setting(between(0, 1, low_open=True))  # validation every this fraction of an epoch
     fast_dev_run: bool = MISSING
 
 
@@ -118,7 +122,8 @@ class SteeringConfig:
     height: int = setting(IMAGE_SIZE)
     batch_size: int = setting(at_least(1))
     lr: float = setting(positive())  # CPU-sized default; experiment=paper sets the paper's 2e-4
-    lr_step_epochs: int = MISSING  # step decay every N epochs
+    optimizer: str = setting(one_of(("sgd", "adamw")))  # sgd: the thesis's, with step decay; adamw: cosine to 0 over the run
+    lr_step_epochs: int = MISSING  # sgd's step decay every N epochs
     lr_gamma: float = MISSING
     momentum: float = MISSING
     weight_decay: float = MISSING

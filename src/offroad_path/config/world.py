@@ -133,6 +133,7 @@ class WorldConfig:
 @dataclass
 class TestWorldsConfig:
     min_blocks: int = setting(at_least(0))  # the main test set's blocks; 0: no test worlds (the split takes test blocks from the drives)
+    development_blocks: int = setting(at_least(0))  # the development set's blocks (settings are chosen there); 0: none
     # Stress sets (offroad_path.world.held_out): condition groups (offroad_path.world.groups.GROUPS), each reported on its own.
     stress_sets: list[str] = setting(each(one_of(registry("world.groups", "GROUP_KEYS"))))
     per_stress: int = setting(at_least(0))  # worlds per stress set

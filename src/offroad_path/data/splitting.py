@@ -35,6 +35,7 @@ class Frame:
     f0: int
     travelled_m: float  # position along the sequence's driven path at f0
     held_out: bool = False  # from a held-out test world
+    development: bool = False  # from a development world (held out too): its own manifest, development.csv
 
 
 def block_of(sequence: str, travelled_m: float, block_m: float) -> tuple[str, int]:
@@ -43,12 +44,13 @@ def block_of(sequence: str, travelled_m: float, block_m: float) -> tuple[str, in
 
 
 def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Frame]], int]:
-    """({'train': [...], 'val': [...], 'test': [...]}, number of training frames left out as guard),
+    """({'train': [...], 'val': [...], 'test': [...], 'development': [...]}, number of training frames left out as guard),
     by the `split` settings (strategy, test_fraction, val_fraction, block_m, guard_m, seed)."""
     if c.strategy not in STRATEGIES:
         raise ValueError(f"unknown split strategy {c.strategy!r}; valid: {', '.join(STRATEGIES)}")
     rng = np.random.default_rng(c.seed)
-    worlds = [f for f in frames if f.held_out]
+    development = [f for f in frames if f.development]
+    worlds = [f for f in frames if f.held_out and not f.development]
     frames = [f for f in frames if not f.held_out]
     test_fraction = 0.0 if worlds else c.test_fraction
     if c.strategy == "random":
@@ -57,7 +59,7 @@ def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Fr
         n_test, n_val = round(test_fraction * len(frames)), round(c.val_fraction * len(frames))
         picked = [frames[i] for i in order]
         split = {"test": worlds + picked[:n_test], "val": picked[n_test : n_test + n_val], "train": picked[n_test + n_val :]}
-        return split, 0
+        return split | {"development": development}, 0
 
     split = _stretches(frames, test_fraction, c.val_fraction) if c.strategy == "stretch" else _blocks(frames, test_fraction, c, rng)
     held_out: dict[str, np.ndarray] = {}
@@ -67,6 +69,7 @@ def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Fr
     guarded = len(split["train"]) - len(train)
     split["train"] = train
     split["test"] += worlds
+    split["development"] = development
     for name in split:
         split[name].sort(key=lambda f: (f.sequence, f.f0))
     return split, guarded

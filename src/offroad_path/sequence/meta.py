@@ -9,6 +9,7 @@ SPLIT, HELD_OUT = "split", "test"  # a held-out test world says "split": "test";
 # A held-out test world's test set: "main" (drawn from the training drives' distribution, the headline
 # figures) or the stress set it was drawn for (offroad_path.world.held_out.STRESS_SETS); absent: main.
 TEST_SET, MAIN = "test_set", "main"
+DEVELOPMENT = "development"  # held-out worlds settings are chosen on; never scored by evaluate
 GENERATOR = "generator"
 RENDERED = "offroad_path.world"  # the generator of the synthesize stage's sequences
 INGESTED = "offroad_path.ingest"  # the generator of the ingest stage's sequences

@@ -30,6 +30,13 @@ class SteeringFrame:
     mirrored: bool = False
 
 
+def development_worlds(split_dir: Path) -> set[str]:
+    """The split's development worlds (development.csv), on which settings are chosen: PilotNet
+    neither trains nor is tested on them."""
+    development = split_dir / "development.csv"
+    return {sample.sequence for sample in read_manifest(development)} if development.is_file() else set()
+
+
 def steering_split(  # noqa: PLR0913
     labels_dir: Path,
     split_dir: Path,
@@ -41,7 +48,8 @@ def steering_split(  # noqa: PLR0913
 ) -> dict[str, list[SteeringFrame]]:
     """{'train', 'val', 'test'}: frames of every labelled sequence that has steering.txt (or, with
     `steering`, an angle per frame by sequence name in place of steering.txt's)."""
-    runs = read_label_run(labels_dir)
+    kept_out = development_worlds(split_dir)
+    runs = [run for run in read_label_run(labels_dir) if run.name not in kept_out]
     held_out_part = {}  # (sequence, f0) -> 'val' | 'test'
     for part in ("val", "test"):
         for sample in read_manifest(split_dir / f"{part}.csv"):

@@ -18,7 +18,7 @@ from offroad_path.config import steering_folder, steering_stage
 from offroad_path.data.labels import read_label_run
 from offroad_path.sequence import meta
 from offroad_path.steering.dataset import SteeringDataModule
-from offroad_path.steering.evaluation import error_by_magnitude, scatter_plot, steering_metrics
+from offroad_path.steering.evaluation import collapse_check, error_by_magnitude, scatter_plot, steering_metrics
 from offroad_path.steering.frames import PARTS, steering_split
 from offroad_path.steering.task import SteeringTask
 from offroad_path.training.run import MANIFEST_CONTEXTS, RunSpec, fit, run_identity, training_logger
@@ -89,7 +89,8 @@ def fit_steering(cfg: DictConfig) -> dict:
             writer.writeheader()
             writer.writerows(bins)
         scatter_plot(true, predicted, tmp / "scatter.png")
-        return {**steering_metrics(true, predicted, steering.lock_deg, steering.steering_ratio), "by_true_magnitude": bins}
+        collapse = collapse_check(true, predicted, [frame.sequence for frame in parts["test"]])
+        return {**steering_metrics(true, predicted, steering.lock_deg, steering.steering_ratio), **collapse, "by_true_magnitude": bins}
 
     stage = steering_stage(steering.slip, steering.target)
     spec = RunSpec(
@@ -117,6 +118,8 @@ def fit_steering(cfg: DictConfig) -> dict:
     if isinstance(logger, MLFlowLogger):
         for name in ("scatter.png", "error_by_magnitude.csv"):
             logger.experiment.log_artifact(logger.run_id, str(Path(steering.out_dir) / name))
+    if metrics["collapsed"]:
+        log.warning("PilotNet collapsed to a near-constant output: %s", "; ".join(metrics["collapse_reasons"]))
     log.info(
         "PilotNet: test mean absolute error %.4f (%.1f degrees at the steering wheel; straight ahead would score %.4f), "
         "largest predicted magnitude %.3f of true %.3f",

@@ -17,7 +17,7 @@ from omegaconf import DictConfig
 from torchmetrics import MeanAbsoluteError
 
 from offroad_path.steering.pilotnet import PilotNet
-from offroad_path.training.task import BaseTask
+from offroad_path.training.task import OPTIMIZERS, BaseTask, optimizer_with_schedule, sgd_with_step_decay
 
 
 def weighted_mse(predicted: torch.Tensor, true: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
@@ -42,24 +42,34 @@ class SteeringTask(BaseTask):
         target: str = "angle",
         lock_deg: float | None = None,  # the recording vehicle's, for target curvature
         wheelbase_m: float | None = None,
+        optimizer: str = "sgd",
     ):
         if target == "curvature" and not (lock_deg and wheelbase_m):
             raise ValueError("a curvature PilotNet needs the recording vehicle's lock_deg and wheelbase_m")
+        if optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer {optimizer!r}: valid {OPTIMIZERS}")
         super().__init__()
 
     KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")  # every checkpoint's
-    TARGET_KEYS = ("target", "lock_deg", "wheelbase_m")  # a curvature PilotNet's (absent from older checkpoints: angle)
+    OPTIONAL_KEYS = ("target", "lock_deg", "wheelbase_m", "optimizer")  # absent from older checkpoints: angle, sgd
 
     @classmethod
     def from_config(cls, s: DictConfig) -> SteeringTask:
         """From the `steering` config node (conf/steering/default.yaml)."""
         vehicle = {"lock_deg": s.lock_deg, "wheelbase_m": s.wheelbase_m} if s.target == "curvature" else {}
-        return cls(**{k: s[k] for k in cls.KEYS}, target=s.target, **vehicle)
+        return cls(**{k: s[k] for k in cls.KEYS}, target=s.target, optimizer=s.optimizer, **vehicle)
 
     @classmethod
     def from_hyperparameters(cls, hp: dict) -> SteeringTask:
         """From a checkpoint's hyper-parameters, of this version or an earlier one."""
-        return cls(**{k: hp[k] for k in cls.KEYS}, **{k: hp[k] for k in cls.TARGET_KEYS if k in hp})
+        return cls(**{k: hp[k] for k in cls.KEYS}, **{k: hp[k] for k in cls.OPTIONAL_KEYS if k in hp})
+
+    def configure_optimizers(self):
+        """sgd: the thesis's (momentum, the rate times lr_gamma every lr_step_epochs); adamw: AdamW
+        with a 5 % warm-up and a cosine to 0 over the run (the laptop's, as the path networks')."""
+        if self.hparams.get("optimizer", "sgd") == "sgd":
+            return sgd_with_step_decay(self)
+        return optimizer_with_schedule(self, "adamw", "cosine", warmup=0.05)
 
     @property
     def max_curvature(self) -> float | None:

@@ -1,9 +1,11 @@
 """The Lightning task: per-pixel softmax cross-entropy over the path (2 classes) or the world's
-8 semantic classes, SGD as Holder & Breckon trained, torchmetrics per split."""
+8 semantic classes, with an optional soft Dice term; SGD as Holder & Breckon trained, or AdamW
+with a cosine schedule (the laptop recipe, benchmarks/recipe_search.py); torchmetrics per split."""
 
 from __future__ import annotations
 
 import bisect
+import math
 
 import lightning as L
 import torch
@@ -98,7 +100,12 @@ class SegmentationTask(BaseTask):
         momentum: float,
         weight_decay: float,
         channels_last: bool,
+        optimizer: str = "sgd",
+        lr_schedule: str = "step",
+        dice_weight: float = 0.0,
     ):
+        if optimizer not in OPTIMIZERS or lr_schedule not in SCHEDULES:
+            raise ValueError(f"optimizer {optimizer!r}, lr_schedule {lr_schedule!r}: valid {OPTIMIZERS} and {SCHEDULES}")
         super().__init__()
 
     @classmethod
@@ -109,7 +116,7 @@ class SegmentationTask(BaseTask):
         return cls(**own)
 
     def configure_optimizers(self):
-        return sgd_with_milestones(self)
+        return optimizer_with_schedule(self)
 
     def configure_models(self) -> None:
         self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width)
@@ -117,7 +124,15 @@ class SegmentationTask(BaseTask):
             self.model = self.model.to(memory_format=torch.channels_last)
 
     def configure_losses(self) -> None:
-        self.loss = F.cross_entropy  # per-pixel softmax cross-entropy, the paper's (a function: no module in the state dict)
+        self.loss = self.cross_entropy_and_dice  # a method: no module in the state dict
+
+    def cross_entropy_and_dice(self, scores: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """Per-pixel softmax cross-entropy (the paper's) plus dice_weight x soft Dice loss, which
+        scores the overlap the IoU measures rather than each pixel alone (Milletari et al. 2016)."""
+        loss = F.cross_entropy(scores, target)
+        if self.hparams.dice_weight:
+            loss = loss + self.hparams.dice_weight * soft_dice_loss(scores, target)
+        return loss
 
     def configure_metrics(self) -> None:
         n = self.hparams.num_classes
@@ -156,21 +171,50 @@ def segmentation_task(
     return SegmentationTask(model=name, num_classes=num_classes, channels_last=channels_last, **hyperparameters)
 
 
-def sgd_with_milestones(task: L.LightningModule):
-    """SGD with momentum and weight decay (the paper's), the rate ramped linearly from 0 over the
-    first lr_warmup of the run's iterations and multiplied by lr_gamma at each of lr_milestones
-    (fractions of the run's iterations: max_steps when set, else max_epochs x batches per epoch;
-    Lightning's estimated_stepping_batches). The paper says only "a step function" for SegNet: its
-    milestones, like FCN-8s's warm-up, are this project's choice (conf/model/)."""
+OPTIMIZERS = ("sgd", "adamw")
+SCHEDULES = ("step", "cosine")
+
+
+def soft_dice_loss(scores: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """1 - soft Dice of the batch: (N, C, H, W) scores against (N, H, W) classes; the path class
+    alone when C is 2, the mean over classes otherwise."""
+    probability = scores.float().softmax(dim=1)
+    truth = F.one_hot(target, scores.shape[1]).permute(0, 3, 1, 2).to(probability.dtype)  # (N, C, H, W)
+    if scores.shape[1] == 2:
+        probability, truth = probability[:, 1:], truth[:, 1:]
+    overlap = (probability * truth).sum(dim=(0, 2, 3))
+    total = probability.sum(dim=(0, 2, 3)) + truth.sum(dim=(0, 2, 3))
+    return 1 - ((2 * overlap + 1) / (total + 1)).mean()
+
+
+def optimizer_with_schedule(
+    task: L.LightningModule, optimizer: str | None = None, schedule: str | None = None, warmup: float | None = None
+):
+    """SGD with momentum and weight decay (the paper's) or AdamW (decoupled weight decay), the rate
+    ramped linearly from 0 over the first lr_warmup of the run's iterations, then either multiplied
+    by lr_gamma at each of lr_milestones (lr_schedule step) or annealed to 0 along a half cosine
+    (lr_schedule cosine; Loshchilov & Hutter 2017), in fractions of the run's iterations: max_steps
+    when set, else max_epochs x batches per epoch (Lightning's estimated_stepping_batches). The paper
+    says only "a step function" for SegNet: its milestones, like the laptop's recipe, are this
+    project's choice (conf/model/). `optimizer`, `schedule` and `warmup` stand in for hyper-parameters
+    a task does not have (PilotNet's)."""
     hp = task.hparams
-    optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
-    if not hp.lr_milestones and not hp.lr_warmup:
+    optimizer, schedule = optimizer or hp.optimizer, schedule or hp.lr_schedule
+    warmup, milestones = hp.get("lr_warmup", 0.0) if warmup is None else warmup, hp.get("lr_milestones", [])
+    if optimizer == "adamw":
+        optimizer = torch.optim.AdamW(task.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
+    else:
+        optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
+    if schedule == "step" and not milestones and not warmup:
         return optimizer
     total = task.trainer.estimated_stepping_batches
-    warmup, milestones = hp.lr_warmup * total, sorted(round(f * total) for f in hp.lr_milestones)
+    warmup, milestones = warmup * total, sorted(round(f * total) for f in milestones)
 
     def factor(step: int) -> float:
-        return min(1.0, (step + 1) / warmup if warmup else 1.0) * hp.lr_gamma ** bisect.bisect_right(milestones, step)
+        ramp = min(1.0, (step + 1) / warmup if warmup else 1.0)
+        if schedule == "cosine":
+            return ramp * 0.5 * (1 + math.cos(math.pi * min(step, total) / total))
+        return ramp * hp.lr_gamma ** bisect.bisect_right(milestones, step)
 
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
     return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}

@@ -26,7 +26,7 @@ import numpy as np
 from offroad_path.looks import AXIS_VALUES, axis_values
 from offroad_path.world.classes import BASE_COLORS, DIRT, FOLIAGE, GRASS, TREE
 
-APPEARANCE_STREAM = 2  # spawn key: test worlds use 1 (world.held_out.TEST_STREAM)
+APPEARANCE_STREAM = 2  # spawn key: held-out worlds use others (world.held_out's *_STREAM)
 
 # Track surfaces: the DIRT class's albedo and texture contrast, and its ruts' colour and strength
 # (None: the surroundings' own ground cover, so the track is its wear or nothing).

@@ -1,7 +1,11 @@
 """Held-out test worlds: whole drives through worlds of their own, never blocks of a training drive.
 
-Two kinds, each from a seed stream of its own:
+Three kinds, each from a seed stream of its own:
 
+- The development set, on which every setting is chosen (benchmarks/recipe_search.py,
+  benchmarks/learning_curve.py): worlds drawn exactly as the main test set's, from the stream that
+  earlier runs scored their main test set on, until it holds `development_blocks` blocks. No
+  stage trains or scores on it; the split writes it to a manifest of its own.
 - The main test set, which the headline figures (Table 5.1, the baselines, the primaries) score:
   worlds drawn exactly as the training drives are (world.appearance.weights), kept in seed order
   until it holds `min_blocks` blocks of `block_m` labelled metres. It measures the claim on the
@@ -26,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from offroad_path.config.world import TestWorldsConfig, WorldConfig
-from offroad_path.sequence.meta import MAIN
+from offroad_path.sequence.meta import DEVELOPMENT, MAIN
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.appearance import AXES, training_values
 from offroad_path.world.conditions import frame_conditions
@@ -34,7 +38,9 @@ from offroad_path.world.groups import GROUPS
 from offroad_path.world.scene import appearance_weights, build_world
 
 log = logging.getLogger(__name__)
-TEST_STREAM = 1  # the spawn key of test-world seeds: SeedSequence([master, i]) pads with zeros, so [master, 1, i] could repeat a drive's
+# Spawn keys: SeedSequence([master, i]) pads with zeros, so [master, 1, i] could repeat a drive's.
+DEVELOPMENT_STREAM = 1  # the development set's: the retired main test set's stream, which settings were tuned on
+MAIN_STREAM = 4  # the main test set's: drawn once the recipe was fixed; only the committed run is scored on it
 STRESS_STREAM = 3  # the spawn key of stress-world seeds (2 is the appearance's)
 MIN_FRAMES = 3  # labelled-range frames a world needs in a group to count as showing it
 # How a stress set's worlds draw their look (offroad_path.world.appearance.DRAWS); every other set: "training".
@@ -51,15 +57,22 @@ class HeldOutWorld:
 
     @property
     def name(self) -> str:
-        return f"test_{self.index:03d}" if self.test_set == MAIN else f"stress_{self.test_set}_{self.index:03d}"
+        if self.test_set in STREAMS:
+            return f"{PREFIXES[self.test_set]}_{self.index:03d}"
+        return f"stress_{self.test_set}_{self.index:03d}"
 
     @property
     def draw(self) -> str:
         return STRESS_DRAWS.get(self.test_set, "training")
 
 
-def held_out_seed(master_seed: int, index: int) -> int:
-    return int(np.random.SeedSequence([master_seed, index], spawn_key=(TEST_STREAM,)).generate_state(1)[0])
+STREAMS = {DEVELOPMENT: DEVELOPMENT_STREAM, MAIN: MAIN_STREAM}  # the sets drawn as the training drives are
+PREFIXES = {DEVELOPMENT: "dev", MAIN: "test"}
+
+
+def held_out_seed(master_seed: int, index: int, test_set: str = MAIN) -> int:
+    """World `index` of the main test set or the development set, each a stream of its own."""
+    return int(np.random.SeedSequence([master_seed, index], spawn_key=(STREAMS[test_set],)).generate_state(1)[0])
 
 
 def stress_seed(master_seed: int, stress_set: str, index: int) -> int:
@@ -90,7 +103,7 @@ def _candidates(cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, test_se
     batch = max(1, workers or 2)
     for start in range(0, c.max_candidates, batch):
         indices = range(start, min(start + batch, c.max_candidates))
-        seeds = [held_out_seed(master_seed, i) if test_set == MAIN else stress_seed(master_seed, test_set, i) for i in indices]
+        seeds = [held_out_seed(master_seed, i, test_set) if test_set in STREAMS else stress_seed(master_seed, test_set, i) for i in indices]
         jobs = [(cfg, i, seed, c, test_set) for i, seed in zip(indices, seeds, strict=True)]
         yield from map_processes(_survey_job, jobs, workers, [f"{test_set} test world {i}" for i in indices])
 
@@ -101,15 +114,8 @@ def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: i
     if c.min_blocks == 0:
         return []
     chosen: list[HeldOutWorld] = []
-    for world in _candidates(cfg, c, master_seed, MAIN, workers):
-        chosen.append(world)
-        if sum(w.blocks for w in chosen) >= c.min_blocks:
-            break
-    else:
-        raise ValueError(
-            f"synthesize.test_worlds: {c.max_candidates} candidate worlds hold fewer than {c.min_blocks} blocks; raise max_candidates"
-        )
-    log.info("main test set: %d worlds, %d blocks", len(chosen), sum(w.blocks for w in chosen))
+    for test_set, min_blocks, key in ((DEVELOPMENT, c.development_blocks, "development_blocks"), (MAIN, c.min_blocks, "min_blocks")):
+        chosen += _draw_blocks(cfg, c, master_seed, workers, test_set=test_set, min_blocks=min_blocks, key=key)
     for stress_set in c.stress_sets:
         if stress_set in STRESS_DRAWS and not _draws_differ(cfg, stress_set):
             log.warning("stress set %s: the training distribution already draws every such look; left out", stress_set)
@@ -128,6 +134,25 @@ def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: i
         log.info("stress set %s: %d worlds, %d blocks", stress_set, len(kept), sum(w.blocks for w in kept))
         chosen += kept
     return chosen
+
+
+def _draw_blocks(  # noqa: PLR0913
+    cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, workers: int, *, test_set: str, min_blocks: int, key: str
+) -> list[HeldOutWorld]:
+    """The first worlds of a set drawn as the training drives are that hold `min_blocks` blocks."""
+    drawn: list[HeldOutWorld] = []
+    for world in _candidates(cfg, c, master_seed, test_set, workers) if min_blocks else ():
+        drawn.append(world)
+        if sum(w.blocks for w in drawn) >= min_blocks:
+            break
+    else:
+        if min_blocks:
+            raise ValueError(
+                f"synthesize.test_worlds.{key}: {c.max_candidates} candidate worlds hold fewer than {min_blocks} blocks; "
+                "raise max_candidates"
+            )
+    log.info("%s set: %d worlds, %d blocks", test_set, len(drawn), sum(w.blocks for w in drawn))
+    return drawn
 
 
 def _draws_differ(cfg: WorldConfig, stress_set: str) -> bool:
