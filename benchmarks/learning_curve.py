@@ -1,4 +1,4 @@
-"""How much driving a path network needs: its margin over the mean-path prior on the main test set
+"""How much driving a path network needs: its margin over the mean-path prior on the development set
 against the number of training drives, for each setting of the training budget.
 
     python benchmarks/learning_curve.py [--data data] [--models unet fcn] [--drives 2 4 8 16]
@@ -7,8 +7,10 @@ against the number of training drives, for each setting of the training budget.
 
 Run after `dvc repro` (it reads the committed run's labels and split). Nested subsets of the
 training drives of that one rendering (the first k drives by name; each subset's validation and
-test frames are the run's own), the train stage itself on each (no pretraining, the default's
-augmentation and mirrored copies), scored on the main test set (no stress world). Settings:
+frames are the run's own), the train stage itself on each (no pretraining, the default's
+augmentation and mirrored copies), scored on the development set (split/development.csv: held-out
+worlds drawn as the main test set is, from a stream of their own; settings are chosen there, never
+on the main test set). Settings:
 
 - epochs: the default's epochs (trainer.max_epochs, early stopping on), so SGD steps grow with the data;
 - steps: a fixed number of SGD steps, the default's at all drives (--steps), so only the data grows;
@@ -41,17 +43,18 @@ SETTINGS = ("epochs", "steps", "wide")
 def read_split(split_dir: Path) -> dict[str, list]:
     from offroad_path.data.manifest import read_manifest
 
-    return {name: read_manifest(split_dir / f"{name}.csv") for name in ("train", "val", "test")}
+    return {name: read_manifest(split_dir / f"{name}.csv") for name in ("train", "val", "development")}
 
 
 def subset_split(split: dict[str, list], drives: list[str], folder: Path) -> Path:
-    """A split folder: the training frames of `drives`, the run's validation frames of them, the main test set."""
+    """A split folder: the training frames of `drives`, the run's validation frames of them, and the
+    development set as its test manifest (what the train stage predicts)."""
     from offroad_path.data.manifest import write_manifest
 
     folder.mkdir(parents=True, exist_ok=True)
     write_manifest(folder / "train.csv", [s for s in split["train"] if s.sequence in drives])
     write_manifest(folder / "val.csv", [s for s in split["val"] if s.sequence in drives])
-    write_manifest(folder / "test.csv", split["test"])
+    write_manifest(folder / "test.csv", split["development"])
     return folder
 
 
@@ -91,15 +94,13 @@ def curve(args: argparse.Namespace) -> dict:
     from offroad_path.config import load_config
     from offroad_path.data.loading import load_labels
     from offroad_path.evaluation.metrics import counts, mean_path, pooled
-    from offroad_path.evaluation.report import sample_test_sets
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
-    from offroad_path.sequence.meta import MAIN
     from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.statistics.scores import iou
 
     cfg = load_config()
     split = read_split(args.data / "split")
-    split["test"] = [s for s, kept in zip(split["test"], sample_test_sets(split["test"]) == MAIN, strict=True) if kept]
+    split["test"] = split["development"]
     labels = load_labels(split["test"])
     blocks = sample_blocks(split["test"], args.data / "labels", cfg.split.block_m)
     b = cfg.evaluate.bootstrap
@@ -190,7 +191,7 @@ def figure(result: dict, path: Path) -> None:
     ax.axhline(0.0, color="grey", lw=0.8)
     ax.set_xlabel("training frames (before mirroring)")
     ax.set_ylabel("IoU minus mean-path prior")
-    ax.set_title(f"main test set: {result['test_worlds']} worlds, {result['test_images']} images; 95 % intervals", fontsize=10)
+    ax.set_title(f"development set: {result['test_worlds']} worlds, {result['test_images']} images; 95 % intervals", fontsize=10)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -212,8 +213,8 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--figure", type=Path, default=None, help="e.g. docs/images/learning_curve.png")
     args = parser.parse_args()
-    if not (args.data / "split" / "train.csv").is_file():
-        parser.exit(2, f"{args.data / 'split' / 'train.csv'}: not found; run `dvc repro` (or --data a run's data folder)\n")
+    if not (args.data / "split" / "development.csv").is_file():
+        parser.exit(2, f"{args.data / 'split' / 'development.csv'}: not found; run `dvc repro split` (or --data a run's data folder)\n")
     if "wide" in args.settings and "epochs" not in args.settings:
         parser.exit(2, "--settings: wide takes its wall time from the epochs runs; list epochs too\n")
     args.settings = sorted(args.settings, key=SETTINGS.index)  # epochs before wide

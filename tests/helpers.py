@@ -149,8 +149,8 @@ def tiny_repo(repo: Path) -> Path:
     # thread per stage, since two pipelines run at once (tests/test_pipeline_dvc.py).
     tiny = {
         "world": {"frames": 12, "width": 256, "height": 144, "max_distance_m": 40.0},  # a smaller ground grid: worlds build twice as fast
-        "synthesize": {"sequences": 2, "test_worlds": {"min_blocks": 3, "per_stress": 1,
-                                                     "stress_sets": ["held_out_look"]}},  # a main test world, a stress one
+        "synthesize": {"sequences": 2, "test_worlds": {"min_blocks": 3, "per_stress": 1, "development_blocks": 1,
+                                                     "stress_sets": ["held_out_look"]}},  # main, stress and development worlds
         "label": {"distance_m": 4.0, "stride_m": 1.0}, "split": {"block_m": 2.0, "guard_m": 1.0},
         "data": {"width": 64, "height": 48, "batch_size": 2}, "model": {"width": 0.125}, "trainer": {"max_epochs": 1},
         "pretrain": {"max_epochs": 1}, "steering": {"max_epochs": 1},

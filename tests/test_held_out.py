@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from offroad_path.looks import axis_values
@@ -12,11 +13,15 @@ from offroad_path.world.record import sequence_seed
 from offroad_path.world.scene import build_world
 
 
-def test_test_world_seeds_are_never_training_seeds():
+def test_test_world_seeds_are_never_training_or_development_seeds():
     training = {sequence_seed(0, i) for i in range(1000)}
     tests = {held_out_seed(0, i) for i in range(1000)}
+    development = {held_out_seed(0, i, "development") for i in range(1000)}
     stress = {stress_seed(0, name, i) for name in ("dappled", "off_track") for i in range(1000)}
     assert not training & tests and not (training | tests) & stress and len(stress) == 2000
+    assert not development & (training | tests | stress) and len(development) == 1000
+    # the development set is the stream the earlier runs' main test set was drawn from (spawn key 1)
+    assert held_out_seed(0, 5, "development") == int(np.random.SeedSequence([0, 5], spawn_key=(1,)).generate_state(1)[0])
 
 
 @pytest.mark.slow(seconds=7)
@@ -36,7 +41,7 @@ def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config
 @pytest.mark.slow(seconds=40)
 def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case(compose_config):
     c = compose_config(
-        "synthesize.test_worlds.min_blocks=3", "synthesize.test_worlds.per_stress=1",
+        "synthesize.test_worlds.min_blocks=3", "synthesize.test_worlds.per_stress=1", "synthesize.test_worlds.development_blocks=2",
         "synthesize.test_worlds.stress_sets=[held_out_look,outside_look]",
     ).synthesize.test_worlds  # fmt: skip
     cfg = compose_config().world
@@ -45,7 +50,11 @@ def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case
     # the main set: the first candidates in seed order, until the blocks are there, whatever they show
     assert [w.index for w in main] == list(range(len(main))) and sum(w.blocks for w in main[:-1]) < 3 <= sum(w.blocks for w in main)
     assert all(w.seed == held_out_seed(0, w.index) and w.draw == "training" and w.name == f"test_{w.index:03d}" for w in main)
-    stress = {w.test_set: w for w in chosen if w.test_set != "main"}
+    development = [w for w in chosen if w.test_set == "development"]
+    assert [w.index for w in development] == list(range(len(development))) and sum(w.blocks for w in development) >= 2
+    assert all(w.seed == held_out_seed(0, w.index, "development") and w.name == f"dev_{w.index:03d}" for w in development)
+    assert not {w.seed for w in development} & {w.seed for w in main}
+    stress = {w.test_set: w for w in chosen if w.test_set not in ("main", "development")}
     assert list(stress) == ["held_out_look", "outside_look"]
     for name, world in stress.items():
         assert name in world.groups and world.seed == stress_seed(0, name, world.index) and world.name == f"stress_{name}_{world.index:03d}"
@@ -57,7 +66,11 @@ def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case
 
 
 def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog):
-    c = compose_config("synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.stress_sets=[outside_look]").synthesize.test_worlds
+    c = compose_config(
+        "synthesize.test_worlds.min_blocks=1",
+        "synthesize.test_worlds.development_blocks=0",
+        "synthesize.test_worlds.stress_sets=[outside_look]",
+    ).synthesize.test_worlds
     every = compose_config(
         *(f"world.appearance.weights.{axis}.{value}=1.0" for axis in ("track", "light") for value in axis_values()[axis])
     ).world
@@ -67,10 +80,17 @@ def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog
 
 def test_too_few_candidates_is_an_error_naming_the_set(compose_config):
     c = compose_config("synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50").synthesize.test_worlds
-    with pytest.raises(ValueError, match=r"synthesize\.test_worlds: 1 candidate worlds hold fewer than 50 blocks; raise max_candidates"):
+    with pytest.raises(
+        ValueError, match=r"test_worlds\.development_blocks: 1 candidate worlds hold fewer than 30 blocks; raise max_candidates"
+    ):
         choose_held_out_worlds(compose_config().world, c, master_seed=0, workers=1)
     c = compose_config(
-        "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=1",
+        "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50", "synthesize.test_worlds.development_blocks=0"
+    ).synthesize.test_worlds
+    with pytest.raises(ValueError, match=r"test_worlds\.min_blocks: 1 candidate worlds hold fewer than 50 blocks; raise max_candidates"):
+        choose_held_out_worlds(compose_config().world, c, master_seed=0, workers=1)
+    c = compose_config(
+        "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.development_blocks=0",
         "synthesize.test_worlds.stress_sets=[shadow_water]", "synthesize.test_worlds.per_stress=2",
     ).synthesize.test_worlds  # fmt: skip
     with pytest.raises(ValueError, match=r"give stress set shadow_water [01] of 2 worlds; raise max_candidates or lower per_stress"):

@@ -13,6 +13,7 @@ import pytest
 import yaml
 from helpers import ROOT, dvc, dvc_at_once, in_repo, run_notebook, tiny_repo
 
+from offroad_path.data.manifest import read_manifest
 from offroad_path.sequence import find_sequences
 
 # One of the three networks, to save the suite's time: the grid's stages and tables are the same
@@ -61,7 +62,7 @@ def check_stress_set(metrics: dict, runs: set[str], worlds: list[dict]) -> None:
 
 
 @pytest.mark.slow(seconds=210)
-def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, monkeypatch):
+def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, monkeypatch):  # noqa: PLR0915
     # A clone elsewhere, deeper, at the same time, must reproduce the hashes of the stages that
     # write paths (the split's manifests point into the labels and recordings): no output depends
     # on the path. (Up to the split only, to save the suite's time.)
@@ -80,6 +81,10 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
         assert there[stage] == here[stage], stage
     worlds = json.loads((repo_copy / "data" / "synthetic" / "summary.json").read_text())["test_worlds"]
     assert len(find_sequences(repo_copy / "data" / "synthetic")) == 2 + len(worlds) and worlds  # two drives, held-out test worlds
+    # the development world: in its own manifest, never in the main test set evaluate scores
+    development = {s.sequence for s in read_manifest(repo_copy / "data" / "split" / "development.csv")}
+    assert development == {w["name"] for w in worlds if w["test_set"] == "development"} and development
+    assert not development & {s.sequence for s in read_manifest(repo_copy / "data" / "split" / "test.csv")}
     assert json.loads((repo_copy / "metrics" / "label.json").read_text())["labels"] > 0
     for model in GRID:
         for pretraining in ("none", "segmentation"):

@@ -121,6 +121,13 @@ def test_split_stage_takes_a_held_out_recording_as_test_and_refuses_another_spli
     assert {s.sequence for s in test} == {"world"} and summary["test_worlds"] == ["world"]
     assert summary["samples"]["test"] == 2 * len(list((labels / "world" / "label").glob("*.png")))
     assert summary["test_blocks"] == len({int(d // 4) for d in read_label_run(labels)[1].distance()[[s.f0 for s in test]]})
+    # A development world: held out too, but in development.csv alone (settings are chosen there).
+    (world / "meta.json").write_text(json.dumps(meta | {"split": "test", "test_set": "development"}))
+    summary = split(compose_config(*overrides))
+    development = read_manifest(tmp_path / "split" / "development.csv")
+    assert {s.sequence for s in development} == {"world"} and summary["development_worlds"] == ["world"]
+    assert summary["test_worlds"] == [] and not any(s.sequence == "world" for name in ("train", "val", "test")
+                                                     for s in read_manifest(tmp_path / "split" / f"{name}.csv"))  # fmt: skip
     (world / "meta.json").write_text(json.dumps(meta | {"split": "train"}))
     with pytest.raises(ValueError, match=r"world/meta\.json: \"split\" is 'train'; the only value it may take is \"test\""):
         split(compose_config(*overrides))

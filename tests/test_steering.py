@@ -112,3 +112,19 @@ def test_stage_fast_dev_run_writes_its_outputs(compose_config, labelled_drive, s
     assert rows[0] == "truth,prediction" and len(rows) - 1 == metrics["test_frames"]
     for name in ("predictions.csv", "error_by_magnitude.csv", "metrics.json", "scatter.png"):
         assert (tmp_path / "steering" / name).is_file()
+
+
+def test_a_constant_pilotnet_is_flagged_as_collapsed_and_a_steering_one_is_not():
+    from offroad_path.steering.evaluation import collapse_check
+
+    rng = np.random.default_rng(0)
+    worlds = [f"w{i // 50}" for i in range(400)]  # 8 worlds of 50 frames
+    true = np.clip(rng.normal(0, 0.25, 400), -1, 1)
+    constant = collapse_check(true, np.full(400, 0.02), worlds)
+    assert constant["collapsed"] and len(constant["collapse_reasons"]) == 2
+    steering = collapse_check(true, true + rng.normal(0, 0.03, 400), worlds)
+    low, high = steering["straight_ahead_margin_interval"]
+    assert not steering["collapsed"] and 0 < low < steering["straight_ahead_margin"] < high
+    # the right range but no better than straight ahead (noise as large as the angles): collapsed on the error alone
+    noisy = collapse_check(true, rng.normal(0, 0.4, 400), worlds)
+    assert noisy["collapsed"] and noisy["collapse_reasons"] == ["error not below straight ahead's (95 % interval of the margin reaches 0)"]

@@ -3,7 +3,9 @@ records runs (children of a sweep in a multirun), pretrained weights load or fai
 
 from __future__ import annotations
 
+import itertools
 import json
+import math
 import sqlite3
 import subprocess
 import sys
@@ -265,3 +267,36 @@ def test_the_schedule_warms_up_then_steps_at_fractions_of_the_run():
     assert isinstance(fixed.configure_optimizers(), torch.optim.SGD)
     old = {k: v for k, v in task.hparams.items() if k not in ("lr_milestones", "lr_warmup")} | {"lr_step_epochs": 30}
     assert SegmentationTask.for_inference(old).hparams.lr_milestones == []  # a checkpoint of an earlier version still loads
+
+
+def test_soft_dice_loss_scores_the_path_overlap():
+    from offroad_path.training.task import soft_dice_loss
+
+    path = torch.zeros(1, 1, 4, 4, dtype=torch.long)
+    path[..., :2] = 1  # 8 of 16 pixels are path
+    sure = torch.zeros(1, 2, 4, 4)
+    sure[:, 1] = torch.where(path[:, 0] == 1, 20.0, -20.0)  # scores that say exactly the path
+    assert soft_dice_loss(sure, path[:, 0]).item() == pytest.approx(0.0, abs=1e-4)
+    even = torch.zeros(1, 2, 4, 4)  # probability 1/2 everywhere: overlap 4, sums 8 + 8, Dice (8 + 1) / (16 + 1)
+    assert soft_dice_loss(even, path[:, 0]).item() == pytest.approx(1 - 9 / 17, abs=1e-6)
+
+
+def test_the_cosine_schedule_warms_up_then_anneals_to_zero():
+    from offroad_path.training.task import SegmentationTask
+
+    task = SegmentationTask(model="unet", num_classes=2, width=0.125, lr=0.1, lr_milestones=[], lr_gamma=0.1, lr_warmup=0.1,
+                            momentum=0.9, weight_decay=0.0, channels_last=False, optimizer="adamw", lr_schedule="cosine")  # fmt: skip
+    task.trainer = type("T", (), {"estimated_stepping_batches": 100})()
+    configured = task.configure_optimizers()
+    optimizer, scheduler = configured["optimizer"], configured["lr_scheduler"]["scheduler"]
+    assert isinstance(optimizer, torch.optim.AdamW)
+    rates = []
+    for _ in range(100):
+        rates.append(optimizer.param_groups[0]["lr"])
+        optimizer.step()
+        scheduler.step()
+    assert rates[0] == pytest.approx(0.1 / 10) and rates[9] == pytest.approx(0.1 * 0.5 * (1 + math.cos(math.pi * 0.09)))
+    assert max(rates) <= 0.1 and rates[-1] < 1e-4 and all(a >= b for a, b in itertools.pairwise(rates[10:]))
+    with pytest.raises(ValueError, match="optimizer 'adam'"):
+        SegmentationTask(model="unet", num_classes=2, width=0.125, lr=0.1, lr_milestones=[], lr_gamma=0.1, lr_warmup=0.0,
+                         momentum=0.9, weight_decay=0.0, channels_last=False, optimizer="adam")  # fmt: skip

@@ -125,6 +125,8 @@ def primaries_markdown(conclusions, measured: dict[str, dict]) -> str:
 def _primary_row(v: Verdict, entry: dict) -> str:
     section, _, key = v.compare.partition("/")
     a, _, b = key.replace("_postprocessed_vs_raw", "-postprocessed_vs_raw").partition("_vs_")
+    if entry.get("weakest"):  # the intersection-union test rests on its weakest member
+        a = f"{a} (weakest: {entry['weakest']})"
     if v.interval is None:
         return f"| {v.name} | {v.claim} | {a} vs {b} | not measured | | not measured |"
     i = v.interval

@@ -25,7 +25,15 @@ from offroad_path.evaluation.rendering import (
 )
 from offroad_path.evaluation.report import POSTPROCESSING, TestSet
 from offroad_path.evaluation.steering import SteeringComparison
-from offroad_path.evaluation.tables import PP_KEY, markdown_table, method_title, network_name, result_row, split_run_name
+from offroad_path.evaluation.tables import (
+    EVERY_SCRATCH_VS_PRIOR,
+    PP_KEY,
+    markdown_table,
+    method_title,
+    network_name,
+    result_row,
+    split_run_name,
+)
 from offroad_path.evaluation.temporal import TemporalRow, score_temporal
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, Uncertainty
 from offroad_path.statistics.bootstrap import Draws, Interval, mean
@@ -302,6 +310,7 @@ class PrimaryQuestions:
         self.conclusions = e.conclusions
         self.mine = owned(self.conclusions.primaries, self.SECTIONS)
         self.sources = {"uncertainty": uncertainty.draws, "steering_from_paths": steering.draws}
+        self.uncertainty = uncertainty
         self.found: dict[str, dict] = {}
 
     def score(self, test: TestSet) -> None:
@@ -309,6 +318,12 @@ class PrimaryQuestions:
         for name, (section, key) in self.mine.items():
             if (draws := self.sources[section].get(key)) is not None:
                 self.found[name] = from_draws(draws, self.conclusions.alpha, family)
+                if key == EVERY_SCRATCH_VS_PRIOR:
+                    # Intersection-union: named by its weakest member; a one-sided claim ("each above the
+                    # prior") whose weakest estimate is at or below 0 cannot be supported, whatever its p.
+                    self.found[name]["weakest"] = self.uncertainty.weakest.split("_vs_")[0]
+                    if draws.estimate <= 0:
+                        self.found[name]["p_value"] = 1.0
 
     def markdown(self) -> str:
         if not self.mine:

@@ -118,6 +118,7 @@ class Uncertainty:
         self.resampling = bootstrap.resampling
         self.blocks = len(set(bootstrap.blocks))
         self.seeds: list[int] = []
+        self.weakest = ""  # the central claim's weakest comparison against the prior (<run>_vs_mean_path_prior)
         self.intervals: dict[tuple[str, str], Interval] = {}
         self.others: dict[tuple[str, str], dict[str, Interval]] = {}  # precision, recall, accuracy
         self.over_seeds: dict[tuple[str, str], tuple[float, float]] = {}  # (mean, sample sd) of the seeds' IoU, with several
@@ -144,7 +145,8 @@ class Uncertainty:
             self.differences[key] = self.draws[key].interval()
         against_prior = [key for key, _, y in comparisons(test.runs) if y == PRIOR]
         if against_prior:
-            self.draws[EVERY_SCRATCH_VS_PRIOR] = self.draws[weakest_of({key: self.draws[key] for key in against_prior})]
+            self.weakest = weakest_of({key: self.draws[key] for key in against_prior})
+            self.draws[EVERY_SCRATCH_VS_PRIOR] = self.draws[self.weakest]
             self.differences[EVERY_SCRATCH_VS_PRIOR] = self.draws[EVERY_SCRATCH_VS_PRIOR].interval()
 
     def markdown(self) -> str:

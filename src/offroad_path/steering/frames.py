@@ -16,6 +16,7 @@ import numpy as np
 
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import read_manifest
+from offroad_path.sequence import meta
 
 log = logging.getLogger(__name__)
 PARTS = ("train", "val", "test")
@@ -30,13 +31,6 @@ class SteeringFrame:
     mirrored: bool = False
 
 
-def development_worlds(split_dir: Path) -> set[str]:
-    """The split's development worlds (development.csv), on which settings are chosen: PilotNet
-    neither trains nor is tested on them."""
-    development = split_dir / "development.csv"
-    return {sample.sequence for sample in read_manifest(development)} if development.is_file() else set()
-
-
 def steering_split(  # noqa: PLR0913
     labels_dir: Path,
     split_dir: Path,
@@ -48,12 +42,14 @@ def steering_split(  # noqa: PLR0913
 ) -> dict[str, list[SteeringFrame]]:
     """{'train', 'val', 'test'}: frames of every labelled sequence that has steering.txt (or, with
     `steering`, an angle per frame by sequence name in place of steering.txt's)."""
-    kept_out = development_worlds(split_dir)
-    runs = [run for run in read_label_run(labels_dir) if run.name not in kept_out]
     held_out_part = {}  # (sequence, f0) -> 'val' | 'test'
     for part in ("val", "test"):
         for sample in read_manifest(split_dir / f"{part}.csv"):
             held_out_part[sample.sequence, sample.f0] = part
+    # A held-out world the split does not test (a development world, settings are chosen on) is
+    # neither trained nor tested on.
+    tested = {sequence for sequence, _ in held_out_part}
+    runs = [run for run in read_label_run(labels_dir) if run.name in tested or not meta.held_out(run.sequence.meta, run.sequence.root)]
     parts: dict[str, list[SteeringFrame]] = {p: [] for p in PARTS}
     skipped, guarded = [], 0
     for run in runs:
