@@ -40,6 +40,10 @@ RECIPES: dict[str, list[str]] = {
     "adamw_3e-3": [*ADAMW, "model.lr=3e-3", "model.dice_weight=0"],
     "adamw_3e-3_dice": [*ADAMW, "model.lr=3e-3", "model.dice_weight=1"],
     "adamw_1e-3_dice": [*ADAMW, "model.lr=1e-3", "model.dice_weight=1"],
+    # FCN-8s alone (the others have batch norm already): batch norm after each VGG convolution
+    "sgd_bn": [*SGD, "model.batch_norm=true"],
+    "adamw_1e-3_dice_bn": [*ADAMW, "model.lr=1e-3", "model.dice_weight=1", "model.batch_norm=true"],
+    "adamw_1e-3_dice_3_epochs": [*ADAMW, "model.lr=1e-3", "model.dice_weight=1", "trainer.max_epochs=3"],
     "adamw_3e-3_dice_ema": [
         *ADAMW,
         "model.lr=3e-3",
@@ -75,8 +79,10 @@ def train_once(split_dir: Path, out: Path, model: str, seed: int, *, overrides: 
     if not done.is_file():
         cfg = load_config(
             f"model={model}", "pretraining=none", f"seed={seed}", f"data.split_dir={split_dir}", f"train.out_dir={out}",
-            "train.sample_images=0", "resume=false", "mlflow.enabled=false", "logger=csv", f"paths.logs_dir={out.parent / 'logs'}",
+            "train.sample_images=0", "resume=false", "mlflow.enabled=false", "logger=csv", f"paths.logs_dir={out}_logs",
             f"trainer.val_check_interval={val_every}", *overrides,
+            # early stopping's patience in epochs as the default's, though validation comes every val_every of one
+            f"callbacks.early_stopping.patience={round(load_config().callbacks.early_stopping.patience / val_every)}",
         )  # fmt: skip
         set_threads(cfg.threads)
         start = time.perf_counter()

@@ -44,7 +44,8 @@ def overrides(inputs: Path, out: Path) -> list[str]:
             "drive.arguments.steering=[unet-none,unet-none+temporal,pilotnet,oracle,straight]",
             "drive.arguments.vehicle=[unet-none,pilotnet]", "drive.arguments.traction=[unet-none,pilotnet_slip,oracle]",
             "drive.length_m=8", "drive.starts_per_world=2", "drive.width=128", "drive.height=72", "drive.bootstrap.resamples=100",
-            "drive.workers=1", "drive.seeds=[0]", "evaluate.conclusions.primaries.closed_loop.compare=steering/unet-none_vs_pilotnet",
+            "drive.workers=1", "drive.seeds=[0]", "+evaluate/primaries@evaluate.conclusions.primaries=closed_loop",  # the presets' family
+            "evaluate.conclusions.primaries.closed_loop.compare=steering/unet-none_vs_pilotnet",
             f"drive.out_dir={out / 'drive'}", f"drive.metrics_path={out / 'drive.json'}",
             f"mlflow.tracking_uri=sqlite:///{out / 'mlflow.db'}"]  # fmt: skip
 

@@ -16,7 +16,7 @@ from offroad_path.models import MODELS
 from offroad_path.training.task import SegmentationTask
 
 STEPS = 100
-LOSS_FACTOR = 10.0  # the loss after STEPS SGD steps on one batch, at most this fraction of the first (measured: 30x to 180x)
+LOSS_FACTOR = 2.5  # the loss falls at least this much in STEPS steps on one batch (cross-entropy + Dice, AdamW: 2.7x to 46x measured)
 
 
 def one_batch() -> tuple[torch.Tensor, torch.Tensor]:
@@ -37,9 +37,11 @@ def one_batch() -> tuple[torch.Tensor, torch.Tensor]:
 def test_each_network_overfits_one_batch(compose_config, model):
     m = compose_config(f"model={model}").model
     torch.manual_seed(0)
+    # The configured network, loss and optimiser at a constant rate (a schedule needs a trainer's length)
     task = SegmentationTask(model=model, num_classes=2, width=0.125, lr=m.lr, lr_milestones=[], lr_gamma=0.1, lr_warmup=0.0,
-                            momentum=m.momentum, weight_decay=0.0, channels_last=False)  # fmt: skip
-    optimiser = torch.optim.SGD(task.parameters(), lr=m.lr, momentum=m.momentum)
+                            momentum=m.momentum, weight_decay=0.0, channels_last=False, optimizer=m.optimizer, lr_schedule="step",
+                            dice_weight=m.dice_weight, batch_norm=m.batch_norm)  # fmt: skip
+    optimiser = task.configure_optimizers()
     images, targets = one_batch()
     losses = []
     for _ in range(STEPS):

@@ -229,7 +229,7 @@ def test_a_resume_checkpoint_of_another_configuration_is_refused(tiny_config, tm
     first = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false")
     train(first)
     (state_a,) = (tmp_path / ".resume").glob("run-*")
-    changed = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false", "model.lr=0.001")
+    changed = tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1", "mlflow.enabled=false", "model.lr=0.002")
     train(changed)
     (state_b,) = set((tmp_path / ".resume").glob("run-*")) - {state_a}  # a changed config never shares resume state
     shutil.copy(state_a / "last.ckpt", state_b / "last.ckpt")  # as if it did

@@ -57,13 +57,17 @@ def test_the_block_needs_both_markers():
 
 
 def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
-    from offroad_path.evaluation.summary import _steering
+    from offroad_path.evaluation.summary import _steering, pilotnet_check
 
     row = {"mae": 0.1}
     evaluation = {"steering_from_paths": {"straight_ahead": {"mae": 0.21}, "pilotnet": row, "label_ceiling": {"mae": 0.07}}}
-    seeds = [{"seed": s, "mean_absolute_error": e, "straight_ahead_mean_absolute_error": 0.213, "test_frames": 10}
-             for s, e in ((0, 0.094), (1, 0.097), (2, 0.213))]  # fmt: skip
+    seeds = [{"seed": s, "mean_absolute_error": e, "straight_ahead_mean_absolute_error": 0.213, "test_frames": 10,
+              "largest_predicted_magnitude": m, "largest_true_magnitude": 0.47, "straight_ahead_margin": 0.213 - e,
+              "straight_ahead_margin_interval": [0.213 - e - 0.02, 0.213 - e + 0.02], "collapsed": c}
+             for s, e, m, c in ((0, 0.094, 0.45, False), (1, 0.097, 0.40, False), (2, 0.213, 0.01, True))]  # fmt: skip
     text = _steering(evaluation, seeds)[0]
     assert "over its 3 training seeds 0.135 ± 0.068, mean ± sd" in text  # mean 0.1347, sd 0.0679 by hand
-    assert "training seed 2 learnt a constant (1 of 3)" in text
-    assert "learnt a constant" not in _steering(evaluation, seeds[:2])[0]
+    check = pilotnet_check(seeds)
+    assert "seed 2 0.213 (straight ahead 0.213; margin +0.000 [-0.020, +0.020], largest output 0.01 of 0.47)" in check
+    assert "Seed 2 predicts a near-constant (1 of 3)" in check
+    assert "No seed collapsed" in pilotnet_check(seeds[:2]) and "near-constant" not in pilotnet_check(seeds[:2])

@@ -133,14 +133,15 @@ def training_runs(cfg: DictConfig) -> dict[str, str]:
 
 
 def flat(metrics: dict, prefix: str = "") -> dict[str, float]:
-    """metrics.json's nested numbers as MLflow metric names (a.b.c; list items a.b.0; True as 1)."""
+    """metrics.json's nested numbers as MLflow metric names (a.b.c; list items a.b.0; True as 1; text
+    left out)."""
     out: dict[str, float] = {}
     items = metrics.items() if isinstance(metrics, dict) else enumerate(metrics)
     for key, value in items:
         name = f"{prefix}{key}"
         if isinstance(value, dict | list):
             out |= flat(value, f"{name}.")
-        elif value is not None:
+        elif value is not None and not isinstance(value, str):
             out[name] = float(value)
     return out
 

@@ -49,6 +49,7 @@ class ModelConfig:
     momentum: float = setting(between(0, 1, high_open=True))  # SGD's
     weight_decay: float = setting(at_least(0))
     dice_weight: float = setting(at_least(0))  # a soft Dice loss term beside the cross-entropy (0: cross-entropy alone, the paper's)
+    batch_norm: bool | None = MISSING  # a network whose normalisation is a choice (FCN-8s): after each convolution; null: its own
     imagenet_weights: str = MISSING  # torchvision VGG16(-BN) file that pretraining=imagenet reads for this network
     channels_last: bool = MISSING  # the memory format train.channels_last takes by default (measured per network)
     paper: PaperTrainingConfig | None = None  # absent for a network the paper did not train

@@ -71,6 +71,8 @@ def results_markdown(  # noqa: PLR0913
     ]
     if "mean_path_prior" in evaluation.get("baselines", {}):
         out += [baselines_markdown(evaluation, heading=""), ""]
+    if check := pilotnet_check(steering):
+        out.append(check)
     out.append(stress.markdown(evaluation.get("stress_sets", {}), heading="Stress sets (exploratory). "))
     if full:
         if table := comparisons_markdown(u, skip=(EVERY_SCRATCH_VS_PRIOR,)):  # the central claim: a primary, above
@@ -90,19 +92,11 @@ def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
         return []
     first = steering[0] if steering else {}
     errors = [seed["mean_absolute_error"] for seed in steering]
-    # A seed that learnt a constant (about 0) steers no better than always straight ahead: say so by name.
-    straight = [seed["straight_ahead_mean_absolute_error"] for seed in steering]
-    collapsed = [seed.get("seed", k) for k, seed in enumerate(steering) if errors[k] >= 0.99 * straight[k]]
     own = f"{fmt(first.get('mean_absolute_error', float('nan')))}" + (
         f"; over its {len(errors)} training seeds {statistics.mean(errors):.3f} ± {statistics.stdev(errors):.3f}, mean ± sd"
         if len(errors) > 1
         else ""
     )
-    if collapsed:
-        own += (
-            f"; training seed {', '.join(map(str, collapsed))} learnt a constant ({len(collapsed)} of {len(steering)}) and "
-            "steers no better than straight ahead"
-        )
     lines = [
         "Steering on the same test frames (mean absolute error of the normalised angle, each network's and PilotNet's pooled over "
         f"their training seeds): always straight ahead {s['straight_ahead']['mae']:.3f}, PilotNet {s['pilotnet']['mae']:.3f} "
@@ -112,6 +106,39 @@ def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
         against_pilotnet_markdown(s),
     ]
     return lines
+
+
+def collapsed_seeds(steering: list[dict]) -> list[int]:
+    """The PilotNet seeds that predict a near-constant (the train_steering stage's collapse check)."""
+    return [seed.get("seed", k) for k, seed in enumerate(steering) if seed.get("collapsed")]
+
+
+def pilotnet_check(steering: list[dict]) -> str:
+    """One sentence on every PilotNet seed against straight ahead (the stage's collapse check): what
+    the open-loop comparison's PilotNet is."""
+    if not steering:
+        return ""
+    rows = []
+    for k, seed in enumerate(steering):
+        low, high = seed.get("straight_ahead_margin_interval", (float("nan"), float("nan")))
+        straight = seed["straight_ahead_mean_absolute_error"]
+        rows.append(
+            f"seed {seed.get('seed', k)} {seed['mean_absolute_error']:.3f} (straight ahead {straight:.3f}; "
+            f"margin {seed.get('straight_ahead_margin', float('nan')):+.3f} [{low:+.3f}, {high:+.3f}], largest output "
+            f"{seed['largest_predicted_magnitude']:.2f} of {seed['largest_true_magnitude']:.2f})"
+        )
+    bad = collapsed_seeds(steering)
+    verdict = (
+        f"seed {', '.join(map(str, bad))} predicts a near-constant ({len(bad)} of {len(steering)}): the open-loop comparison's "
+        "PilotNet includes a collapsed network, and what it says of end-to-end steering is that weak"
+        if bad
+        else "no seed collapsed: each steers closer to the true angle than straight ahead, its 95 % interval (test worlds "
+        "resampled) above 0"
+    )
+    return (
+        "PilotNet, the end-to-end baseline, on its test frames (mean absolute error of the normalised angle per training seed; "
+        f"the collapse check of the train_steering stage): {'; '.join(rows)}. {verdict[0].upper()}{verdict[1:]}.\n"
+    )
 
 
 def _driving(drive: dict, conclusions=None) -> list[str]:

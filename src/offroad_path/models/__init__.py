@@ -10,10 +10,11 @@ from offroad_path.models.unet import UNet
 MODELS: dict[str, type[SegmentationNet]] = {"segnet": SegNet, "fcn": FCN8s, "unet": UNet}
 
 
-def build_model(name: str, num_classes: int = 2, width: float = 1.0) -> SegmentationNet:
+def build_model(name: str, num_classes: int = 2, width: float = 1.0, batch_norm: bool | None = None) -> SegmentationNet:
+    """batch_norm: the choice of a network that has one (FCN-8s); None: the network's own."""
     if name not in MODELS:
         raise ValueError(f"unknown model {name!r}; valid: {', '.join(sorted(MODELS))}")
-    return MODELS[name](num_classes=num_classes, width=width)
+    return MODELS[name](num_classes=num_classes, width=width, **({} if batch_norm is None else {"batch_norm": batch_norm}))
 
 
 __all__ = ["MODELS", "FCN8s", "SegNet", "SegmentationNet", "UNet", "build_model"]

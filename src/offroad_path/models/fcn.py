@@ -10,6 +10,8 @@ Initialisation: the 15 convolutions before the scores have no batch norm, and Py
 initialisation (variance 1 / (3 fan_in)) shrinks the signal at every layer, so from scratch the
 network often learnt only the class biases (all background; 2 of 3 laptop seeds). The convolutions
 start as He et al. (2015) and torchvision's VGG do: normal, variance 2 / fan_out, biases at zero.
+batch_norm=True puts batch normalisation after each of the 13 VGG convolutions (as VGG16-BN; not in
+Long et al.): the laptop recipe's (benchmarks/README.md, "Training recipe").
 """
 
 from __future__ import annotations
@@ -35,11 +37,11 @@ def bilinear_kernel(channels: int, size: int) -> torch.Tensor:
 class FCN8s(SegmentationNet):
     title = "FCN"
 
-    def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3, dropout: float = 0.5):
+    def __init__(self, num_classes: int = 2, width: float = 1.0, in_channels: int = 3, dropout: float = 0.5, batch_norm: bool = False):
         super().__init__(num_classes)
         stages = [[scaled(c, width) for c in stage] for stage in VGG16]
         self.features = nn.ModuleList(
-            nn.Sequential(*layers, nn.MaxPool2d(2, 2)) for layers in conv_stages(stages, in_channels, batch_norm=False)
+            nn.Sequential(*layers, nn.MaxPool2d(2, 2)) for layers in conv_stages(stages, in_channels, batch_norm=batch_norm)
         )
         cin = stages[-1][-1]
         fc = scaled(4096, width)

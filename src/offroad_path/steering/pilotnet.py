@@ -48,6 +48,9 @@ class PilotNet(nn.Module):
             if isinstance(m, nn.Conv2d | nn.Linear):
                 nn.init.kaiming_normal_(m.weight, nonlinearity="relu")
                 nn.init.zeros_(m.bias)
+        # The output starts at 0, where tanh passes the gradient whole: He's variance there put the
+        # first outputs near +-1, where tanh's gradient vanishes, and the network stayed at a constant.
+        nn.init.zeros_(self.head[-1].weight)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:  # (N, 3, H, W) -> steering (N,) in [-1, 1]
         return torch.tanh(self.head(self.features(image))[:, 0])

@@ -51,7 +51,7 @@ class SteeringTask(BaseTask):
         super().__init__()
 
     KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")  # every checkpoint's
-    OPTIONAL_KEYS = ("target", "lock_deg", "wheelbase_m", "optimizer")  # absent from older checkpoints: angle, sgd
+    OPTIONAL_KEYS = ("target", "lock_deg", "wheelbase_m", "optimizer")  # absent from older checkpoints: their defaults
 
     @classmethod
     def from_config(cls, s: DictConfig) -> SteeringTask:

@@ -103,6 +103,7 @@ class SegmentationTask(BaseTask):
         optimizer: str = "sgd",
         lr_schedule: str = "step",
         dice_weight: float = 0.0,
+        batch_norm: bool | None = None,
     ):
         if optimizer not in OPTIMIZERS or lr_schedule not in SCHEDULES:
             raise ValueError(f"optimizer {optimizer!r}, lr_schedule {lr_schedule!r}: valid {OPTIMIZERS} and {SCHEDULES}")
@@ -119,7 +120,7 @@ class SegmentationTask(BaseTask):
         return optimizer_with_schedule(self)
 
     def configure_models(self) -> None:
-        self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width)
+        self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width, self.hparams.get("batch_norm"))
         if self.hparams.channels_last:
             self.model = self.model.to(memory_format=torch.channels_last)
 
