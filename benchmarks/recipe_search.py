@@ -183,16 +183,19 @@ def figure(result: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     models = list(dict.fromkeys(r["model"] for r in result["rows"]))
-    fig, axes = plt.subplots(1, len(models), figsize=(4.2 * len(models), 3.4), dpi=120, sharey=True, squeeze=False)
+    recipes = list(dict.fromkeys(r["recipe"] for r in result["rows"]))
+    colours = {recipe: f"C{i}" for i, recipe in enumerate(recipes)}  # one colour per recipe, one line style per seed
+    fig, axes = plt.subplots(1, len(models), figsize=(4.4 * len(models), 3.6), dpi=120, sharey=True, squeeze=False)
     for ax, model in zip(axes[0], models, strict=True):
         for r in (r for r in result["rows"] if r["model"] == model):
             for seed, curve in zip(r["seeds"], r["curves"], strict=True):
-                ax.plot(*zip(*curve, strict=True), marker=".", label=f"{r['recipe']} seed {seed}")
+                ax.plot(*zip(*curve, strict=True), marker=".", color=colours[r["recipe"]], ls="-" if seed == r["seeds"][0] else "--",
+                        label=f"{r['recipe']}, seed {seed}")  # fmt: skip
         ax.set_title(model, fontsize=10)
         ax.set_xlabel("SGD steps")
         ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
     axes[0][0].set_ylabel("validation IoU")
-    axes[0][-1].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path)
 

@@ -187,4 +187,4 @@ def test_scores_against_hand_counts():
     difference = comparisons["unet", "pilotnet"]
     assert difference.estimate == pytest.approx((1 - 4) * 1000 / 60)
     assert difference.high < 0  # every drive: one fewer; every resample is below 0
-    assert "fewer interventions: unet than pilotnet" in finding(comparisons)
+    assert "interval below 0: unet - pilotnet" in finding(comparisons) and "exploratory" in finding(comparisons)

@@ -198,12 +198,17 @@ def finding(comparisons: dict[tuple[str, str], Interval]) -> str:
     end-to-end policy, by paired intervals that exclude 0; or that no difference was measured."""
     if not comparisons:
         return "No end-to-end policy was driven: no comparison."
-    better = [f"{a} than {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.high < 0]
-    worse = [f"{a} than {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.low > 0]
+    better = [f"{a} - {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.high < 0]
+    worse = [f"{a} - {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.low > 0]
     same = [f"{a} and {b}" for (a, b), i in comparisons.items() if i.contains_zero]
-    parts = ([f"fewer interventions: {'; '.join(better)}"] if better else []) + ([f"more: {'; '.join(worse)}"] if worse else [])
-    parts += [f"no difference measured between {', '.join(same)}"] if same else []
-    return "Path prediction + pure pursuit against end-to-end steering, paired on the same drives: " + "; ".join(parts) + "."
+    parts = ([f"interval below 0: {'; '.join(better)}"] if better else []) + ([f"above 0: {'; '.join(worse)}"] if worse else [])
+    parts += [f"interval holding 0 between {', '.join(same)}"] if same else []
+    return (
+        "Path prediction + pure pursuit minus end-to-end steering, interventions per km paired on the same drives "
+        "(exploratory, uncorrected hierarchical intervals: a direction is a finding only where a primary's exact test rejects): "
+        + "; ".join(parts)
+        + "."
+    )
 
 
 def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str], conclusions) -> tuple[str, dict]:

@@ -52,9 +52,12 @@ def results_table_markdown(m: dict, heading: str = "\n## Results (Table 5.1 layo
     seeds = u.get("test_set", {}).get("seeds", 1)
     lines = [
         f"{heading}Pooled over the test set, each method's training seeds together: every score (statistics.scores), IoU with "
-        "its 95 % hierarchical-bootstrap interval; beside them the thesis's figures (Holder 2018, Table 5.1: its private data, "
-        "full-size networks on a GPU; its pretraining rows pretrained on a semantic segmentation task, as ours on the world's "
-        "8 classes, its other rows from random weights).\n",
+        "its 95 % hierarchical-bootstrap interval; beside them the thesis's figures (Holder 2018, Table 5.1), which are not "
+        "this run's to compare: its private data, and its networks, inputs and training differ from this run's (full-width "
+        "networks on 512 x 288 images, trained with SGD for tens of thousands of steps on a GPU, against this run's narrower "
+        "networks on smaller inputs for a few hundred steps: `model.width`, `data.width`, `trainer.max_epochs`); its "
+        "pretraining rows pretrained on a semantic segmentation task, as ours on the world's 8 classes, its other rows from "
+        "random weights.\n",
         "| network | pretraining | post-processing | "
         + " | ".join(f"{TITLES.get(name, name)} [95 % interval]" if name == "iou" else TITLES.get(name, name) for name in SCORES)
         + (" | IoU over seeds, mean ± sd" if seeds > 1 else "")

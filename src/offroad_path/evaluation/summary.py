@@ -151,6 +151,12 @@ def _driving(drive: dict, conclusions=None) -> list[str]:
         f"{d['starts_per_world']} start(s) x {len(d.get('seeds', [0]))} training seed(s) x {d['length_m']:g} m of route per policy; "
         "intervals are 95 % hierarchical (worlds, starts, seeds)."
     ]
+    if not drive.get("primaries"):
+        lines[0] += (
+            " **A pilot**: no closed-loop argument is a primary of this run (its route is far below what they need; "
+            "`experiment=gpu` and `experiment=full` test them), so these counts are exploratory rates that plan the next run, "
+            "and no direction they suggest is a finding."
+        )
     lines += [argument_markdown(a, drive[a], heading="####") for a in arguments]
     for name, entry in drive.get("primaries", {}).items():
         if sentence := power_sentence(entry, conclusions.power if conclusions is not None else 0.8):
