@@ -213,8 +213,22 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--figure", type=Path, default=None, help="e.g. docs/images/learning_curve.png")
     args = parser.parse_args()
+    from offroad_path.models import MODELS
+
+    problems = [f"--models: unknown {m!r}; valid: {', '.join(MODELS)}" for m in args.models if m not in MODELS]
+    problems += [f"--seeds: {s} is negative" for s in args.seeds if s < 0]
+    problems += [f"--drives: {k} is not a number of drives (at least 1)" for k in args.drives if k < 1]
+    problems += [f"--steps: {args.steps} is not positive"] if args.steps is not None and args.steps < 1 else []
+    problems += [f"--resamples: {args.resamples} is not positive"] if args.resamples is not None and args.resamples < 1 else []
+    if problems:
+        parser.exit(2, f"error: {problems[0]}\n")
     if not (args.data / "split" / "development.csv").is_file():
         parser.exit(2, f"{args.data / 'split' / 'development.csv'}: not found; run `dvc repro split` (or --data a run's data folder)\n")
+    from offroad_path.data.manifest import read_manifest
+
+    drives = len({s.sequence for s in read_manifest(args.data / "split" / "train.csv")})
+    if too_many := [k for k in args.drives if k > drives]:
+        parser.exit(2, f"error: --drives: {too_many[0]} is more than the run's {drives} training drives\n")
     if "wide" in args.settings and "epochs" not in args.settings:
         parser.exit(2, "--settings: wide takes its wall time from the epochs runs; list epochs too\n")
     args.settings = sorted(args.settings, key=SETTINGS.index)  # epochs before wide

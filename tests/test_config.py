@@ -85,3 +85,23 @@ def test_paths_own_puts_every_path_under_the_users_folder(tmp_path):
     assert cfg["label"]["in_dir"] == str(root / "recordings")
     with pytest.raises(Exception, match=r"paths\.root"):
         OmegaConf.to_container(load_config("paths=own"), resolve=True)  # no folder given
+
+
+@pytest.mark.parametrize(
+    ("override", "says"),
+    [
+        ("evaluate.seeds=[0,0]", r"evaluate\.seeds=\[0, 0\]: must list at least one value, no value twice"),
+        ("evaluate.seeds=[]", r"evaluate\.seeds=\[\]: must list at least one value"),
+        ("drive.seeds=[1,1]", r"drive\.seeds=\[1, 1\]: must list at least one value, no value twice"),
+        (
+            "synthesize.test_worlds.stress_sets=[off_track,off_track]",
+            r"stress_sets=\['off_track', 'off_track'\]: must list no value twice.*valid: .*dappled",
+        ),
+    ],
+)
+def test_a_list_naming_a_value_twice_or_nothing_is_refused_before_any_work(override, says):
+    from offroad_path.config import load_config, validate_config
+    from offroad_path.utils.rules import ConfigValueError
+
+    with pytest.raises(ConfigValueError, match=says):
+        validate_config(load_config(override))

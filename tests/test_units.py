@@ -5,6 +5,7 @@ dvc.yaml generator, each on tiny inputs (the fast tier, `pytest -m "not slow"`).
 from __future__ import annotations
 
 import pickle
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -214,3 +215,17 @@ def test_each_epoch_is_seeded_from_the_run_seed_and_the_epoch():
 
     assert draws(0, 1) == draws(0, 1)  # a resumed epoch draws what the uninterrupted one drew
     assert len({draws(0, 0), draws(0, 1), draws(1, 0)}) == 3
+
+
+def test_a_checkpoint_with_nan_weights_is_refused_naming_the_weight(tmp_path):
+    from offroad_path.training.checkpoints import CheckpointError, load_checkpoint, save_weights
+    from offroad_path.training.task import SegmentationTask
+
+    task = SegmentationTask(model="unet", num_classes=2, width=0.125, lr=0.01, lr_milestones=[], lr_gamma=0.1, lr_warmup=0.0,
+                            momentum=0.9, weight_decay=0.0, channels_last=False)  # fmt: skip
+    first = next(name for name, weight in task.state_dict().items() if weight.is_floating_point())
+    with torch.no_grad():
+        task.state_dict()[first].view(-1)[0] = float("nan")
+    save_weights(tmp_path / "diverged.ckpt", task)
+    with pytest.raises(CheckpointError, match=rf"diverged\.ckpt: weight {re.escape(first)} holds NaN or infinite values"):
+        load_checkpoint(tmp_path / "diverged.ckpt")

@@ -42,7 +42,7 @@ def run_export(cfg: DictConfig) -> float:
     os.close(fd)
     try:
         difference = export_onnx(model.task.model, model.width, model.height, Path(tmp), export.opset)
-        if difference > export.tolerance:
+        if not difference <= export.tolerance:  # NaN compares false either way: it fails here
             raise ValueError(f"{export.checkpoint}: the ONNX export differs from PyTorch by {difference:.2e} (> {export.tolerance:g})")
         write_text_atomic(sidecar(out), "export\n")
         os.replace(tmp, out)

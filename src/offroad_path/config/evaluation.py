@@ -8,7 +8,7 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import IMAGE_SIZE, PRETRAININGS, _model_names
 from offroad_path.config.world import VehicleConfig
-from offroad_path.utils.rules import at_least, between, each, one_of, positive, setting
+from offroad_path.utils.rules import at_least, between, distinct, each, one_of, positive, setting
 
 
 @dataclass
@@ -58,8 +58,8 @@ class ConclusionsConfig:
 class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
-    seeds: list[int] = setting(each(at_least(0)))  # training seeds of every run: data/runs/<run>/seed<k>
-    drive_seeds: list[int] = setting(each(at_least(0)))  # the closed loop's (drive.seeds; the slip and curvature PilotNets')
+    seeds: list[int] = setting(distinct(at_least(0), nonempty=True))  # training seeds of every run: data/runs/<run>/seed<k>
+    drive_seeds: list[int] = setting(distinct(at_least(0)))  # the closed loop's (drive.seeds; the slip and curvature PilotNets')
     runs: list[str] = MISSING  # <architecture>-<pretraining>; conf/ takes the grid of the two lists
     runs_dir: str = MISSING  # <run>/predictions from train
     postprocessed_dir: str = MISSING  # <run>/ from postprocess
@@ -86,7 +86,7 @@ class DriveConfig:
 
     synthetic_dir: str = MISSING
     runs_dir: str = MISSING
-    seeds: list[int] = setting(each(at_least(0)))  # every policy drives once with each training seed's networks
+    seeds: list[int] = setting(distinct(at_least(0), nonempty=True))  # every policy drives once with each training seed's networks
     pilotnets: dict[str, str] = MISSING  # end-to-end policy name -> train_steering checkpoint, {seed} for the seed
     out_dir: str = MISSING
     metrics_path: str = MISSING

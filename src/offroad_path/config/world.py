@@ -9,7 +9,7 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import FINITE, IMAGE_SIZE, PITCH, registry
 from offroad_path.looks import axis_values
-from offroad_path.utils.rules import Rule, at_least, between, each, one_of, positive, setting
+from offroad_path.utils.rules import Rule, at_least, between, distinct, each, one_of, positive, setting
 
 
 @dataclass
@@ -135,7 +135,7 @@ class TestWorldsConfig:
     min_blocks: int = setting(at_least(0))  # the main test set's blocks; 0: no test worlds (the split takes test blocks from the drives)
     development_blocks: int = setting(at_least(0))  # the development set's blocks (settings are chosen there); 0: none
     # Stress sets (offroad_path.world.held_out): condition groups (offroad_path.world.groups.GROUPS), each reported on its own.
-    stress_sets: list[str] = setting(each(one_of(registry("world.groups", "GROUP_KEYS"))))
+    stress_sets: list[str] = setting(distinct(one_of(registry("world.groups", "GROUP_KEYS"))))
     per_stress: int = setting(at_least(0))  # worlds per stress set
     block_m: float = setting(positive())
     horizon_m: float = MISSING  # the last metres of a drive, which get no label (label.distance_m, whose rule checks it)

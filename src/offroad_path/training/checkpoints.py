@@ -41,6 +41,9 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         raise CheckpointError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {_first_sentence(e)})") from e
     if not isinstance(saved, dict) or not isinstance(saved.get("state_dict"), dict) or not isinstance(saved.get("hyper_parameters"), dict):
         raise CheckpointError(f"{path}: not a checkpoint of this project (no state_dict and hyper_parameters)")
+    for name, tensor in saved["state_dict"].items():
+        if torch.is_tensor(tensor) and tensor.is_floating_point() and not torch.isfinite(tensor).all():
+            raise CheckpointError(f"{path}: weight {name} holds NaN or infinite values: a diverged run, not a model")
     return saved
 
 

@@ -68,6 +68,18 @@ def each(inner: dict) -> dict:
     return inner | {"rule": Rule(lambda v: all(check.test(x) for x in (v.values() if isinstance(v, Mapping) else v)), check.says)}
 
 
+def distinct(inner: dict, nonempty: bool = False) -> dict:
+    """`each(inner)` on a list that names nothing twice (and, with nonempty, names something)."""
+    check: Rule = each(inner)["rule"]
+
+    def test(v: Any) -> bool:
+        items = list(v)
+        return check.test(items) and len(set(map(str, items))) == len(items) and (bool(items) or not nonempty)
+
+    item = check.says.removeprefix("must be ") or "one of the valid names"
+    return each(inner) | {"rule": Rule(test, f"must list {'at least one value, ' if nonempty else ''}no value twice, each {item}")}
+
+
 def setting(rules: dict | None = None) -> Any:
     """A config field: its value lives in conf/ (never here), its rules here."""
     return dataclasses.field(default=MISSING, metadata=rules or {})
@@ -93,4 +105,6 @@ def validate(cfg: DictConfig, schema: type, prefix: str = "", only: Iterable[str
         check = f.metadata.get("rule")
         if check is not None and value is not None and not check.test(value):
             says = check.says or f"must be one of: {', '.join(f.metadata['choices']())}"
+            if check.says and "choices" in f.metadata:  # a list of choices with a rule of its own (distinct)
+                says += f"; valid: {', '.join(f.metadata['choices']())}"
             raise ConfigValueError(f"{key}={value!r}: {says}")
