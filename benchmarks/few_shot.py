@@ -1,4 +1,4 @@
-"""How much real driving a path network needs (issue 45): test IoU on a held-out stretch of a real
+"""How much real driving a path network needs: test IoU on a held-out stretch of a real
 drive against the number of real training frames, from random weights and from the world-trained
 network of the same architecture (pretraining=world), three seeds each.
 

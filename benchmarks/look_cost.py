@@ -1,4 +1,4 @@
-"""What a world's look costs (issue 44): building a world and rendering one view, with and without
+"""What a world's look costs: building a world and rendering one view, with and without
 world.appearance, back to back in one process on one core.
 
     python benchmarks/look_cost.py [--worlds 8] [--views 10]

@@ -1,5 +1,5 @@
 """How long each stage's command takes to answer --help, --cfg job, a misspelt key and a bad value
-(issue 40: before any torch or Lightning import). Wall time of the whole process, median of
+(before any torch or Lightning import). Wall time of the whole process, median of
 --repeats runs; with several --src, the checkouts are timed in turn for each cell, so that load
 on the machine falls on all of them alike.
 

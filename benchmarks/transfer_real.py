@@ -1,4 +1,4 @@
-"""Transfer to real frames (issue 44): every network trained only on the rendered world, all its
+"""Transfer to real frames: every network trained only on the rendered world, all its
 training seeds, on a real KITTI drive with a turn (`../shared/data/kitti00_mono`, labelled from its
 true poses), beside what needs no perception.
 

@@ -71,3 +71,24 @@ def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
     assert "seed 2 0.213 (straight ahead 0.213; margin +0.000 [-0.020, +0.020], largest output 0.01 of 0.47)" in check
     assert "Seed 2 predicts a near-constant (1 of 3)" in check
     assert "No seed collapsed" in pilotnet_check(seeds[:2]) and "near-constant" not in pilotnet_check(seeds[:2])
+
+
+HISTORY_PAGES = {"docs/benchmark-history.md"}  # history lives here and in CHANGELOG.md
+
+
+def test_the_product_holds_no_issue_number_and_the_docs_no_date():
+    """Code, configuration, docs and benchmarks say what is, not when or in which issue it came:
+    no issue numbers anywhere in them, no dates in src/, conf/ and docs/ (history pages excepted;
+    the benchmarks' measurement tables keep their date column)."""
+    issue, date = re.compile(r"(?i)\bissue \d+|\bissues? #?\d{2,}\b"), re.compile(r"\b20\d\d-\d\d-\d\d\b")
+    found = []
+    for folder, suffixes in (("src", (".py",)), ("conf", (".yaml",)), ("docs", (".md",)), ("benchmarks", (".py", ".md"))):
+        for path in sorted((ROOT / folder).rglob("*")):
+            name = str(path.relative_to(ROOT))
+            if path.suffix not in suffixes or name in HISTORY_PAGES:
+                continue
+            text = path.read_text()
+            found += [f"{name}: an issue number" for _ in issue.findall(text)[:1]]
+            if folder != "benchmarks":
+                found += [f"{name}: a date" for _ in date.findall(text)[:1]]
+    assert not found, found

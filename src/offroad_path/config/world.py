@@ -91,7 +91,7 @@ WEIGHTS = {
 class AppearanceConfig:
     """Each world's look drawn from a stream of its own (offroad_path.world.appearance)."""
 
-    enabled: bool = MISSING  # false: the single look of the worlds before issue 44, byte for byte
+    enabled: bool = MISSING  # false: the single look the worlds had before looks existed, byte for byte
     # Looks no training drive shows; every other test world is drawn from them (the held-out-appearance test set).
     held_out: list[dict[str, str]] = setting(LOOKS)
     # The training distribution: per axis, each value's weight (absent or 0: no training drive shows it); an

@@ -1,7 +1,7 @@
 """The colour baseline: a per-pixel classifier on colour and image position alone, trained on the
 training split and scored like the networks. What a network scores above it needs context (the
 track's shape, where it leads); a world whose tracks a colour gives away lets a network score
-without any (issue 44).
+without any.
 
 scikit-learn's HistGradientBoostingClassifier on eight features per pixel: R, G, B, H, S, V (each in
 [0, 1]) and the pixel's row and column (fractions of the image). Training pixels are drawn evenly
