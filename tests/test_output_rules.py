@@ -235,3 +235,18 @@ def test_a_resume_checkpoint_of_another_configuration_is_refused(tiny_config, tm
     shutil.copy(state_a / "last.ckpt", state_b / "last.ckpt")  # as if it did
     shutil.rmtree(tmp_path / "run")
     refused(train, changed, capsys, tmp_path, state_b / "last.ckpt", "belongs to another configuration")
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077, 0o002])
+def test_written_files_and_folders_take_the_users_umask(tmp_path, umask):
+    from offroad_path.utils.atomic import atomic_directory, write_text_atomic
+
+    old = os.umask(umask)
+    try:
+        write_text_atomic(tmp_path / "metrics.json", "{}\n", "evaluate")
+        with atomic_directory(tmp_path / "out", "split") as tmp:
+            (tmp / "a.csv").write_text("x\n")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "metrics.json").stat().st_mode & 0o777 == 0o666 & ~umask
+    assert (tmp_path / "out").stat().st_mode & 0o777 == 0o777 & ~umask

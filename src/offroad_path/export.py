@@ -17,7 +17,7 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from offroad_path.stage import hydra_stage, reads
-from offroad_path.utils.atomic import UnsafeOutputError, sidecar, write_text_atomic
+from offroad_path.utils.atomic import UnsafeOutputError, current_umask, sidecar, write_text_atomic
 from offroad_path.utils.outputs import Outputs
 
 log = logging.getLogger("offroad_path.export")
@@ -45,6 +45,7 @@ def run_export(cfg: DictConfig) -> float:
         if not difference <= export.tolerance:  # NaN compares false either way: it fails here
             raise ValueError(f"{export.checkpoint}: the ONNX export differs from PyTorch by {difference:.2e} (> {export.tolerance:g})")
         write_text_atomic(sidecar(out), "export\n")
+        os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, out)
     finally:
         Path(tmp).unlink(missing_ok=True)

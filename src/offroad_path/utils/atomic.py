@@ -102,7 +102,7 @@ def atomic_directory(target: str | Path, stage: str, key: str | None = None) -> 
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_siblings(target)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-{os.getpid()}-", dir=target.parent))
-    tmp.chmod(0o755)
+    tmp.chmod(0o777 & ~current_umask())  # mkdtemp's is 0700: the folder takes the user's umask as mkdir's would
     (tmp / MARKER).write_text(f"{stage}\n")
     _UNFINISHED.add(tmp)
     try:
@@ -120,6 +120,18 @@ def atomic_directory(target: str | Path, stage: str, key: str | None = None) -> 
     shutil.rmtree(old, ignore_errors=True)
 
 
+def current_umask() -> int:
+    """The process's umask (Linux: read from /proc without changing it; elsewhere set and restored)."""
+    status = Path("/proc/self/status")
+    if status.is_file():
+        for line in status.read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def write_text_atomic(path: str | Path, text: str, stage: str | None = None) -> None:
     """Replace the file at `path` with `text` in one rename; a stage's output (`stage` given) gets
     a sidecar marker naming the stage, which lets the next run of that stage replace it."""
@@ -133,6 +145,7 @@ def write_text_atomic(path: str | Path, text: str, stage: str | None = None) -> 
     try:
         with os.fdopen(fd, "w") as f:
             f.write(text)
+        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp's is 0600: the file takes the user's umask as open's would
         os.replace(tmp, path)
     finally:
         Path(tmp).unlink(missing_ok=True)
