@@ -180,3 +180,34 @@ def test_the_renderers_tables_give_every_look_name_its_colours_in_drawing_order(
     from offroad_path.world.appearance import LIGHTS, SEASONS, TRACKS, VEGETATION
 
     assert (tuple(TRACKS), tuple(SEASONS), tuple(LIGHTS), tuple(VEGETATION)) == tuple(AXIS_VALUES.values())
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["world.appearance.weights.track={dirt:0,gravel:0,mud:0,ruts:1}", "+world.appearance.weights.season={autumn:1}"],
+        ["world.appearance.held_out=[{track:dirt},{track:gravel},{track:mud}]"],
+    ],
+)
+def test_weights_that_can_draw_only_held_out_looks_are_refused_naming_both_keys(overrides):
+    from offroad_path.config import load_config, validate_config
+    from offroad_path.utils.rules import ConfigValueError
+
+    with pytest.raises(ConfigValueError, match=r"world\.appearance\.weights and world\.appearance\.held_out: every look"):
+        validate_config(load_config(*overrides))
+
+
+def test_no_training_drive_or_main_test_world_of_the_default_or_a_preset_shows_a_held_out_look():
+    from offroad_path.config import load_config
+    from offroad_path.world.appearance import draw_appearance
+    from offroad_path.world.held_out import held_out_seed
+    from offroad_path.world.record import sequence_seed
+
+    for preset in ([], ["experiment=gpu"], ["experiment=full"]):
+        cfg = load_config(*preset)
+        a, sequences = cfg.world.appearance, cfg.synthesize.sequences
+        seeds = [sequence_seed(cfg.synthesize.seed, i) for i in range(sequences)]
+        seeds += [held_out_seed(cfg.synthesize.seed, i, s) for i in range(40) for s in ("main", "development")]
+        for seed in seeds:
+            look = draw_appearance(seed, list(a.held_out), "training", a.weights)
+            assert not look.held_out and not any(all(getattr(look, k) == v for k, v in c.items()) for c in a.held_out), (preset, seed)

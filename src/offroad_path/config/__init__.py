@@ -31,7 +31,7 @@ from offroad_path.config.training import (
     TrainConfig,
     TrainerConfig,
 )
-from offroad_path.config.world import PathsConfig, RigConfig, SynthesizeConfig, WorldConfig
+from offroad_path.config.world import PathsConfig, RigConfig, SynthesizeConfig, WorldConfig, check_looks_drawable
 from offroad_path.utils.rules import setting, validate
 
 
@@ -71,6 +71,8 @@ def validate_config(cfg: DictConfig, groups: tuple[str, ...] | None = None) -> N
     """Every value with a rule in these schemas (only those of `groups` and the top-level values,
     when given), checked before a stage works (ConfigValueError)."""
     validate(cfg, Config, only=groups)
+    if (groups is None or "world" in groups) and OmegaConf.select(cfg, "world.appearance") is not None:
+        check_looks_drawable(cfg.world.appearance)
 
 
 def run_grid(architectures: list[str], pretrainings: list[str]) -> list[str]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -9,7 +11,7 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import FINITE, IMAGE_SIZE, PITCH, registry
 from offroad_path.looks import axis_values
-from offroad_path.utils.rules import Rule, at_least, between, distinct, each, one_of, positive, setting
+from offroad_path.utils.rules import ConfigValueError, Rule, at_least, between, distinct, each, one_of, positive, setting
 
 
 @dataclass
@@ -73,7 +75,7 @@ def _valid_weights(weights: Any) -> bool:
     return all(
         axis in axes
         and set(values) <= set(axes[axis])
-        and all(isinstance(w, int | float) and w >= 0 for w in values.values())
+        and all(isinstance(w, int | float) and math.isfinite(w) and w >= 0 for w in values.values())
         and sum(values.values()) > 0
         for axis, values in weights.items()
     )
@@ -149,3 +151,24 @@ class SynthesizeConfig:
     test_worlds: TestWorldsConfig = field(default_factory=TestWorldsConfig)
     workers: int = setting(at_least(0))  # 0: one per CPU core
     out_dir: str = MISSING
+
+
+def check_looks_drawable(appearance: Any) -> None:
+    """Some look of the training distribution (world.appearance.weights) is not held out
+    (world.appearance.held_out): else every training drive would be drawn in a held-out look, which
+    the held-out-look stress set promises none shows. ConfigValueError naming both keys."""
+    if not appearance.enabled:
+        return
+    axes, weights = axis_values(), appearance.weights or {}
+    support = [
+        [value for value in values if axis not in weights or float(weights[axis].get(value, 0)) > 0] for axis, values in axes.items()
+    ]
+    held_out = [dict(c) for c in appearance.held_out or []]
+    for look in itertools.product(*support):
+        named = dict(zip(axes, look, strict=True))
+        if not any(all(named.get(k) == v for k, v in c.items()) for c in held_out):
+            return
+    raise ConfigValueError(
+        "world.appearance.weights and world.appearance.held_out: every look the weights can draw is held out, so no training "
+        "drive could be drawn; give a value outside the held-out looks a weight above 0, or hold out fewer looks"
+    )

@@ -111,6 +111,8 @@ def draw_appearance(
         look = {axis: fixed.get(axis) or str(rng.choice(choices[axis], p=chances[axis])) for axis in AXES}
         if fixed or not any(_matches(look, c) for c in held_out):
             break
+    else:  # never a held-out look in a world drawn as training is: the config check refuses what cannot be drawn
+        raise ValueError(f"world.appearance.weights and world.appearance.held_out: 1000 draws for seed {seed} all fell on held-out looks")
     sensor = Sensor(
         greyscale=bool(rng.uniform() < 0.25),
         exposure=float(rng.uniform(0.7, 1.4)),
