@@ -5,6 +5,7 @@ rate, poses scaled past any number; and an empty paths.root never writes into th
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -123,3 +124,22 @@ def test_bag_poses_are_put_in_stamp_order_and_conflicting_or_broken_ones_refused
         pose_matrix((0, 0, 0, float("nan")), (1, 2, 3), where)
     with pytest.raises(InputError, match=r"position \(nan, 2, 3\)"):
         pose_matrix((0, 0, 0, 1), (float("nan"), 2, 3), where)
+
+
+@pytest.mark.parametrize("root", [".", "./", "{checkout}", "../{name}", "{link}", "{metrics_link}", "/"])
+def test_a_root_that_is_in_or_holds_the_checkout_is_refused_and_nothing_is_written(tmp_path, root):
+    """`paths=own` with a root that is the checkout, in it, holding it, or reaching it through a link
+    (the root itself, or its metrics/): one line naming the key, exit 2, the committed metrics untouched."""
+    from helpers import ROOT
+
+    (tmp_path / "link").symlink_to(ROOT)
+    (tmp_path / "own").mkdir()
+    (tmp_path / "own" / "metrics").symlink_to(ROOT / "metrics")
+    root = root.format(checkout=ROOT, name=ROOT.name, link=tmp_path / "link", metrics_link=tmp_path / "own")
+    before = {p: p.stat().st_mtime_ns for p in (ROOT / "metrics").rglob("*") if p.is_file()}
+    run = subprocess.run([sys.executable, "-m", "offroad_path.label", "paths=own", f"paths.root={root}"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1, run.stderr
+    assert re.match(r"error: paths\.(root|metrics_dir): .* resolves to .*, which (is|is inside|holds) this checkout", lines[0])
+    assert {p: p.stat().st_mtime_ns for p in (ROOT / "metrics").rglob("*") if p.is_file()} == before

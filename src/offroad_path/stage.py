@@ -141,10 +141,34 @@ def run_stage(stage: Stage, cfg: DictConfig) -> Any:
 
 def check_root(cfg: DictConfig) -> None:
     """paths.root names a folder: an empty one (`paths.root=$ROOT` with ROOT unset) would put every output
-    into this checkout's data/ and metrics/, over the committed run's."""
+    into this checkout's data/ and metrics/, over the committed run's. With `paths=own` (your data), the
+    root and the folders it implies must lie outside this checkout, through links too (the committed
+    runs own what is in it), but for the checkout's own pipeline of your data run by DVC (own/dvc.yaml)."""
     root = OmegaConf.select(cfg, "paths.root", throw_on_missing=False)
     if isinstance(root, str) and not root.strip():
         raise InputError("paths.root", "is empty: give a folder of yours (paths.root=DIR; the checkout's own run: paths.root=.)")
+    if not isinstance(root, str) or paths_choice() != "own":
+        return
+    checkout = CONF_DIR.parent.resolve()
+    pipeline = os.environ.get("DVC_STAGE", "").partition(":")[0]  # DVC names the stage it runs: own/dvc.yaml:label
+    if pipeline.endswith("dvc.yaml") and (checkout / pipeline).parent.resolve() == Path(root).resolve():
+        return
+    for key in ("root", "data_dir", "metrics_dir"):
+        folder = Path(cfg.paths[key]).resolve()
+        where = "is" if folder == checkout else "is inside" if checkout in folder.parents else "holds" if folder in checkout.parents else ""
+        if where:
+            raise InputError(
+                f"paths.{key}",
+                f"{cfg.paths[key]} resolves to {folder}, which {where} this checkout ({checkout}): with paths=own every output "
+                "goes to a folder of yours outside the checkout (its committed runs own what is in it)",
+            )
+
+
+def paths_choice() -> str | None:
+    """The `paths` config group chosen (default, own), when Hydra composed the config."""
+    from hydra.core.hydra_config import HydraConfig
+
+    return HydraConfig.get().runtime.choices.get("paths") if HydraConfig.initialized() else None
 
 
 def check_search_extra(argv: list[str]) -> None:
