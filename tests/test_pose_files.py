@@ -143,3 +143,23 @@ def test_a_root_that_is_in_or_holds_the_checkout_is_refused_and_nothing_is_writt
     assert run.returncode == 2 and len(lines) == 1, run.stderr
     assert re.match(r"error: paths\.(root|metrics_dir): .* resolves to .*, which (is|is inside|holds) this checkout", lines[0])
     assert {p: p.stat().st_mtime_ns for p in (ROOT / "metrics").rglob("*") if p.is_file()} == before
+
+
+@pytest.mark.parametrize(
+    ("times", "says"),
+    [
+        ([0.0, 0.1, 0.05, 0.3], r"row 3 \(0.05\) is not after row 2 \(0.1\)"),
+        ([0.0, 0.0, 0.0, 0.0], r"row 2 \(0\) is not after row 1 \(0\)"),
+        ([0.0, 100.0, 200.0, 300.0], r"frames are 100 apart \(median\).*these look like milliseconds"),
+        ([0.0, 1e8, 2e8, 3e8], r"frames are 1e\+08 apart \(median\).*these look like nanoseconds"),
+    ],
+)
+def test_times_txt_is_checked_on_its_own(tmp_path, times, says):
+    from offroad_path.sequence.reader import read_times
+
+    path = tmp_path / "times.txt"
+    path.write_text("".join(f"{t}\n" for t in times))
+    with pytest.raises(InputError, match=rf"times\.txt: {says}"):
+        read_times(path, len(times))
+    path.write_text("0\n0.1\n0.2\n0.3\n")
+    assert list(read_times(path, 4)) == [0.0, 0.1, 0.2, 0.3]

@@ -142,7 +142,7 @@ def open_sequence(root: str | Path) -> Sequence:
 
     poses_path = _find_poses(root)
     poses = read_poses(poses_path, expected_rows=n) if poses_path else None
-    times = _read_column(root / "times.txt", n) if (root / "times.txt").is_file() else None
+    times = read_times(root / "times.txt", n) if (root / "times.txt").is_file() else None
     steering = _read_column(root / "steering.txt", n) if (root / "steering.txt").is_file() else None
     meta = _read_meta(root / "meta.json")
     depth = _frames_like(root / "depth", left)
@@ -206,6 +206,33 @@ def _read_column(path: Path, expected_rows: int) -> np.ndarray:
     if not np.isfinite(values).all():
         raise InputError(path, f"has a non-finite value at row {int(np.flatnonzero(~np.isfinite(values))[0]) + 1}")
     return values
+
+
+FRAME_INTERVAL_S = (1e-3, 10.0)  # the median time between frames a times.txt in seconds can give
+UNITS = {"milliseconds": 1e-3, "microseconds": 1e-6, "nanoseconds": 1e-9}
+
+
+def read_times(path: Path, expected_rows: int) -> np.ndarray:
+    """times.txt: one time in seconds per frame, each after the one before; InputError naming the
+    file, the row or the unit it looks to be in (a pose-jump check reads speeds from these)."""
+    times = _read_column(path, expected_rows)
+    if len(times) < 2:
+        return times
+    steps = np.diff(times)
+    if len(back := np.flatnonzero(~(steps > 0))):
+        i = back[0]
+        raise InputError(
+            path, f"row {i + 2} ({times[i + 1]:.9g}) is not after row {i + 1} ({times[i]:.9g}): one time per frame, increasing"
+        )
+    low, high = FRAME_INTERVAL_S
+    if not low <= (median := float(np.median(steps))) <= high:
+        unit = next((name for name, scale in UNITS.items() if low <= median * scale <= high), None)
+        raise InputError(
+            path,
+            f"frames are {median:.6g} apart (median): times are in seconds, a frame every {low:g} to {high:g} s"
+            + (f"; these look like {unit}" if unit else ""),
+        )
+    return times
 
 
 def _read_meta(path: Path) -> dict:
