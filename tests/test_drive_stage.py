@@ -82,7 +82,7 @@ def test_outputs_follow_the_contract(driven):
             assert policy["distance_m"] + 5.0 * policy["interventions"] >= policy["route_m"] - 2 * 1.0
             low, value, high = (policy["interventions_per_km"][k] for k in ("low", "value", "high"))
             assert low <= value <= high
-        assert metrics[argument]["finding"].startswith("Path prediction + pure pursuit against end-to-end steering")
+        assert metrics[argument]["finding"].startswith("Path prediction + pure pursuit minus end-to-end steering")
     assert metrics["steering"]["policies"]["oracle"]["interventions"] == 0
     videos = sorted(p.name for p in (drive_dir / "videos").iterdir())
     assert videos == sorted(f"{name}.mp4" for name in metrics["steering"]["policies"])

@@ -48,8 +48,8 @@ def check_closed_loop(repo: Path, steering: dict) -> None:
         "steering": ["unet-segmentation", "pilotnet", "oracle"], "vehicle": ["unet-segmentation", "pilotnet_curvature"],
         "traction": ["unet-segmentation", "pilotnet_slip"]}  # fmt: skip
     assert {p.name for p in (repo / "data" / "drive" / "trajectories").iterdir()} == {"steering", "vehicle", "traction"}
-    # The three arguments' primaries, each driven here: the exact test of their counts at Holm's levels.
-    assert set(drove["primaries"]) == {"closed_loop", "another_vehicle", "slippery_ground"}
+    # The laptop family holds no closed-loop primary (the presets add them): the drive is a pilot, its rates exploratory.
+    assert not drove.get("primaries")
 
 
 def check_stress_set(metrics: dict, runs: set[str], worlds: list[dict]) -> None:
