@@ -126,6 +126,7 @@ def test_bag_poses_are_put_in_stamp_order_and_conflicting_or_broken_ones_refused
         pose_matrix((0, 0, 0, 1), (float("nan"), 2, 3), where)
 
 
+@pytest.mark.slow(seconds=15)  # a stage's process each: its imports take most of it
 @pytest.mark.parametrize("root", [".", "./", "{checkout}", "../{name}", "{link}", "{metrics_link}", "/"])
 def test_a_root_that_is_in_or_holds_the_checkout_is_refused_and_nothing_is_written(tmp_path, root):
     """`paths=own` with a root that is the checkout, in it, holding it, or reaching it through a link
