@@ -97,7 +97,7 @@ def git(repo: Path, *args: str) -> None:
     subprocess.run(["git", *args], cwd=repo, env={**os.environ, **GIT_IDENTITY}, check=True, capture_output=True)
 
 
-def _dvc_command(repo: Path, *args: str) -> dict:
+def dvc_command(repo: Path, *args: str) -> dict:
     env = {**os.environ, **GIT_IDENTITY}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"  # `python` in dvc.yaml is this one
     env["PYTHONPATH"] = str(repo / "src")  # the copy's code, not the installed checkout's
@@ -106,7 +106,7 @@ def _dvc_command(repo: Path, *args: str) -> dict:
 
 def in_repo(repo: Path, *args: str) -> str:
     """`python ARGS` in `repo`, on the copy's code (as its dvc stages run)."""
-    command = _dvc_command(repo)
+    command = dvc_command(repo)
     run = subprocess.run(**(command | {"args": [sys.executable, *args]}), capture_output=True)
     assert run.returncode == 0, run.stdout + run.stderr
     return run.stdout
@@ -126,7 +126,7 @@ def run_notebook(name: str, root: Path, monkeypatch) -> dict:
 
 
 def dvc(repo: Path, *args: str) -> str:
-    run = subprocess.run(**_dvc_command(repo, *args), capture_output=True)
+    run = subprocess.run(**dvc_command(repo, *args), capture_output=True)
     assert run.returncode == 0, run.stdout + run.stderr
     return run.stdout
 
@@ -134,7 +134,7 @@ def dvc(repo: Path, *args: str) -> str:
 def dvc_at_once(commands: list[tuple[Path, list[str]]]) -> list[str]:
     """dvc commands, each (repository, arguments), in several repositories at the same time (their
     stages are mostly single-threaded start-up: two at once take little longer than one)."""
-    runs = [subprocess.Popen(**_dvc_command(repo, *args), stdout=subprocess.PIPE, stderr=subprocess.PIPE) for repo, args in commands]
+    runs = [subprocess.Popen(**dvc_command(repo, *args), stdout=subprocess.PIPE, stderr=subprocess.PIPE) for repo, args in commands]
     outputs = [run.communicate() for run in runs]
     for run, (out, err) in zip(runs, outputs, strict=True):
         assert run.returncode == 0, out + err

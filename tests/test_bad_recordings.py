@@ -222,3 +222,18 @@ def test_manifest_booleans_are_read_strictly(split_dir, tmp_path):
     manifest.write_text("\n".join(rows[:3]) + "\n")
     with pytest.raises(ValueError, match="row 3, column mirrored: 'yes' is not true, false, 1 or 0"):
         read_manifest(manifest)
+
+
+def test_images_resized_after_calibrating_are_refused_naming_the_calibration(drive, tmp_path):
+    """Frames at half size beside the full-size calibration: before, every label was projected off
+    the image and dropped, exit 0 and no word."""
+    from offroad_path.sequence.reader import open_sequence
+
+    copy = tmp_path / "drive"
+    shutil.copytree(drive / "drive", copy, ignore=shutil.ignore_patterns("depth", "semantic"))
+    assert open_sequence(copy).image_size  # as recorded: accepted
+    for image in [*copy.glob("image_l/*.png"), *copy.glob("image_r/*.png")]:
+        frame = cv2.imread(str(image))
+        cv2.imwrite(str(image), cv2.resize(frame, (frame.shape[1] // 2, frame.shape[0] // 2)))
+    with pytest.raises(InputError, match=rf"^{copy / 'calib.txt'}: principal point .* the calibration is for another image size"):
+        open_sequence(copy)

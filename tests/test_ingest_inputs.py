@@ -43,11 +43,20 @@ def bag_config(compose_config, bag: Path, out: Path, *overrides: str):
         ("unsynchronised stamps", {"right_delay_s": 0.05}, [], ["no left/right pair within", "50.0 ms apart"]),
         ("odometry shorter than the drive", {"poses": 6}, ["ingest.topics.odometry=/odom"], ["/odom: the poses cover"]),
         ("not a pose topic", {}, [f"ingest.topics.odometry={LEFT}"], [LEFT, "expected nav_msgs/msg/Odometry"]),
+        # the drive's poses in shuffled order: once an 88 m zig-zag of a 17 m drive, exit 0
+        (
+            "stamps out of step with poses",
+            {"poses": "shuffled", "fps": 10.0},
+            ["ingest.topics.odometry=/odom"],
+            ["/odom: moves", "more than ingest.max_speed_mps): its stamps are out of step"],
+        ),
     ],
 )
 def test_bad_bags_are_refused_naming_the_topic(compose_config, drive, rig, frames, tmp_path, capsys, case, bag_options, overrides, named):
     options = dict(bag_options)
-    if "poses" in options:  # /odom over the first frames only
+    if options.get("poses") == "shuffled":
+        options["poses"] = body_poses(drive / "drive")[: len(frames)][np.random.default_rng(0).permutation(len(frames))]
+    elif "poses" in options:  # /odom over the first frames only
         options["poses"] = body_poses(drive / "drive")[: options["poses"]]
     bag = write_bag(tmp_path / "drive", "sqlite3", frames, rig, **options)
     refused(ingest, bag_config(compose_config, bag, tmp_path / "out", *overrides), capsys, tmp_path, str(bag), *named)

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from helpers import saved_epochs, tagged_processes
+from helpers import dvc_command, saved_epochs, tagged_processes, tiny_repo
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -221,3 +221,33 @@ def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(spli
         assert not (out / "run").exists()  # nothing is published before the run ends
         finish(args(out))
         assert files(out / "run") == expected
+
+
+@pytest.mark.slow(seconds=40)
+def test_a_stage_ends_with_the_dvc_repro_stopped_by_sigterm(tmp_path):
+    """DVC, stopped by SIGTERM, does not pass the signal on to its stage's command: the stage ends
+    anyway (it watches DVC), leaves no process, no output and no lock behind."""
+    repo = tiny_repo(tmp_path / "repo")
+    tiny = repo / "conf" / "experiment" / "tiny.yaml"
+    tiny.write_text(tiny.read_text().replace("frames: 12", "frames: 400"))  # a synthesis long enough to be stopped midway
+    tag = uuid.uuid4().hex
+    command = dvc_command(repo, "repro", "-s", "synthesize")
+    dvc = subprocess.Popen(**command | {"env": {**command["env"], "OFFROAD_TEST_TAG": tag}},
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    deadline = time.monotonic() + 120
+
+    def stage_started() -> bool:
+        return any(b"offroad_path.synthesize" in Path(f"/proc/{pid}/cmdline").read_bytes() for pid in tagged_processes(tag))
+
+    while not stage_started() and dvc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(3)  # past the stage's start-up, into the synthesis
+    assert dvc.poll() is None and stage_started(), "the stage ended before the signal: the test missed its point"
+    dvc.send_signal(signal.SIGTERM)
+    dvc.wait(timeout=60)
+    deadline = time.monotonic() + 20
+    while tagged_processes(tag) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not tagged_processes(tag), "the stage outlived the dvc repro that ran it"
+    assert not (repo / "data" / "synthetic").exists()
+    assert not list(repo.rglob(".*.lock"))

@@ -8,6 +8,7 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from helpers import label_cfg, refused, user_folder
@@ -20,7 +21,8 @@ from offroad_path.predict import run_predict
 from offroad_path.split import split
 from offroad_path.synthesize import synthesize
 from offroad_path.train import train
-from offroad_path.utils.atomic import MARKER
+from offroad_path.utils.atomic import MARKER, UnsafeOutputError
+from offroad_path.utils.outputs import Outputs, check_metrics_follow
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -140,6 +142,31 @@ def test_outputs_of_one_stage_may_not_overlap_each_other(compose_config, recordi
     refused(label, cfg, capsys, tmp_path, "label.metrics_path", "overlaps label.out_dir")
 
 
+def test_label_of_other_data_never_writes_the_pipelines_metrics(compose_config, recordings, tmp_path, capsys):
+    """A copy of a recording labelled elsewhere, from a config whose metrics go to the pipeline's
+    metrics folder (the committed run's, in the checkout): refused, naming label.metrics_path."""
+    pipeline = tmp_path / "pipeline"
+    metrics = pipeline / "metrics" / "label.json"
+    metrics.parent.mkdir(parents=True)
+    metrics.write_text('{"labels": 1356}')
+    cfg = compose_config(f"paths.root={pipeline}", f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'elsewhere'}",
+                         "label.workers=1", "mlflow.enabled=false")  # fmt: skip
+    refused(label, cfg, capsys, tmp_path, "label.metrics_path", f"the input {recordings}")
+
+
+def test_metrics_beside_the_outputs_of_other_data_are_allowed(tmp_path):
+    outputs = Outputs("label", folders={"label.out_dir": tmp_path / "mine" / "labels"},
+                      files={"label.metrics_path": tmp_path / "mine" / "label.json"}, inputs=[tmp_path / "copy"])  # fmt: skip
+    check_metrics_follow(outputs, tmp_path / "pipeline" / "metrics", [tmp_path / "pipeline" / "data"])
+    pipeline_run = Outputs("label", folders={"label.out_dir": tmp_path / "pipeline" / "data" / "labels"},
+                           files={"label.metrics_path": tmp_path / "pipeline" / "metrics" / "label.json"},
+                           inputs=[tmp_path / "pipeline" / "data" / "synthetic"])  # fmt: skip
+    check_metrics_follow(pipeline_run, tmp_path / "pipeline" / "metrics", [tmp_path / "pipeline" / "data"])
+    moved_out = Outputs("label", folders={"label.out_dir": tmp_path / "mine"}, files=dict(pipeline_run.files), inputs=pipeline_run.inputs)
+    with pytest.raises(UnsafeOutputError, match=r"label\.metrics_path=.*label\.out_dir="):
+        check_metrics_follow(moved_out, tmp_path / "pipeline" / "metrics", [tmp_path / "pipeline" / "data"])
+
+
 # -- 2. Checkpoints: weights only, and a clear line for anything else ------------------------------
 
 
@@ -185,9 +212,10 @@ def test_train_refuses_a_pretraining_checkpoint_that_would_run_code(tiny_config,
     [
         (lambda p, good: p.write_bytes(good.read_bytes()[:5000]), "not a readable PyTorch checkpoint"),
         (lambda p, good: p.write_text("hello"), "not a readable PyTorch checkpoint"),
+        (lambda p, good: p.write_bytes(b"c" + np.random.default_rng(0).bytes(4095)), "not a readable PyTorch checkpoint"),
         (lambda p, good: torch.save({"weights": torch.zeros(3)}, p), "not a checkpoint of this project"),
     ],
-    ids=["truncated", "text", "foreign dict"],
+    ids=["truncated", "text", "random bytes", "foreign dict"],
 )
 def test_predict_names_a_corrupt_or_foreign_checkpoint(compose_config, trained, frames_folder, tmp_path, capsys, make, says):
     bad = tmp_path / "bad.ckpt"

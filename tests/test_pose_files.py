@@ -58,6 +58,22 @@ def test_a_step_no_vehicle_makes_is_refused_at_the_recordings_frame_rate(tmp_pat
     assert max_steps(None, 3, 60.0) == pytest.approx([60.0, 60.0])  # no times.txt: 1 s per frame
 
 
+def test_the_sequence_checker_refuses_the_jump_the_label_stage_refuses(drive, tmp_path):
+    copy = tmp_path / "drive"
+    shutil.copytree(drive / "drive", copy, ignore=shutil.ignore_patterns("depth", "semantic"))
+    poses = read_poses(copy / "poses.txt")
+    poses[7:, 0, 3] += 1000.0  # a jump of 1000 m at frame 8
+    (copy / "poses.txt").write_text(poses_to_text(poses))
+    check = [sys.executable, "-m", "offroad_path.sequence", str(copy)]
+    run = subprocess.run(check, capture_output=True, text=True)
+    assert run.returncode == 2, run.stdout
+    jump = r"row 8 is 1e\+03 m from row 7, more than \S+ m at label.poses.max_speed_mps"
+    assert re.fullmatch(rf"error: {copy / 'poses.txt'}: {jump}\n", run.stderr)
+    assert subprocess.run([*check, "--max-speed-mps", "1e6"], capture_output=True, text=True).returncode == 0
+    wrong = subprocess.run([*check, "--max-speed-mps", "0"], capture_output=True, text=True)
+    assert wrong.returncode == 2 and "--max-speed-mps" in wrong.stderr
+
+
 def test_poses_scaled_past_any_number_are_refused(tmp_path):
     poses = drive_poses()
     poses[:, :3, :] *= 1e300  # finite numbers, but no rotation: R^T R overflows

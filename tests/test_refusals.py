@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -18,6 +19,7 @@ import pytest
 from helpers import label_cfg, png_declaring, refused, snapshot, user_folder
 
 from offroad_path.config import load_config, validate_config
+from offroad_path.errors import InputError
 from offroad_path.evaluate import evaluate
 from offroad_path.label import label
 from offroad_path.split import split
@@ -103,6 +105,21 @@ def test_values_without_meaning_are_refused_naming_the_key(override):
         validate_config(load_config(override))
 
 
+@pytest.mark.parametrize("key", ["world.appearance.weights", "world.appearance.weights.track", "evaluate.conclusions.primaries"])
+def test_an_empty_mapping_that_would_change_nothing_is_refused(key):
+    """An override merges into a mapping: `{}` would leave the defaults in place without a word."""
+    with pytest.raises(InputError, match=r"^" + re.escape(f"{key}: ={{}} changes nothing") + r".*" + re.escape(f"~{key}.<entry>")):
+        load_config(f"{key}={{}}")
+
+
+def test_an_axis_override_merges_and_a_deleted_entry_is_gone():
+    """What the config comment documents: `track={ruts:1}` keeps the other tracks' weights; `~` drops one."""
+    merged = load_config("world.appearance.weights.track={ruts:1}").world.appearance.weights.track
+    assert merged.ruts == 1 and merged.dirt == 1
+    primaries = load_config("~evaluate.conclusions.primaries.ranking").evaluate.conclusions.primaries
+    assert "ranking" not in primaries and "central_claim" in primaries
+
+
 # -- Outputs inside inputs ----------------------------------------------------------------------------
 
 
@@ -140,6 +157,15 @@ def test_evaluate_names_a_seed_that_was_not_trained(compose_config, trained, spl
                          f"evaluate.out_dir={tmp_path / 'eval'}", f"evaluate.metrics_path={tmp_path / 'e.json'}",
                          f"evaluate.plots_dir={tmp_path / 'plots'}", "mlflow.enabled=false")  # fmt: skip
     refused(evaluate, cfg, capsys, tmp_path, "evaluate.seeds lists seed")
+
+
+def test_evaluate_names_a_misspelt_primary(compose_config, tmp_path, capsys):
+    """A run name no grid has: refused before any work, instead of a primary left not measured."""
+    key = "evaluate.conclusions.primaries.ranking.compare"
+    cfg = compose_config(f"{key}=uncertainty/fcn-none_vs_unet-nnoe", f"evaluate.out_dir={tmp_path / 'eval'}",
+                         f"evaluate.metrics_path={tmp_path / 'e.json'}", f"evaluate.plots_dir={tmp_path / 'plots'}",
+                         "mlflow.enabled=false")  # fmt: skip
+    refused(evaluate, cfg, capsys, tmp_path, key, "'uncertainty/fcn-none_vs_unet-nnoe' is a comparison no run makes")
 
 
 # -- Checked writes: a full disk is an error, never a success -------------------------------------
@@ -189,6 +215,18 @@ def test_ingest_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(drive, rig
     assert "Traceback" not in run.stderr
     assert not out.exists()
     assert not (tmp_path / "ingested").exists() or not list((tmp_path / "ingested").iterdir())  # no partial or temporary folder
+
+
+def test_label_onto_a_full_disk_fails_in_one_line_naming_the_file_and_leaves_nothing(drive, tmp_path):
+    """Once an error naming no file (the worker's OSError lost its path on the way back)."""
+    out, metrics = tmp_path / "labels", tmp_path / "label.json"
+    run = limited(1024, "offroad_path.label", f"label.in_dir={drive}", f"label.out_dir={out}", f"label.metrics_path={metrics}",
+                  "label.workers=1", "mlflow.enabled=false", cwd=tmp_path)  # fmt: skip
+    assert run.returncode == 2, run.stderr[-1500:]
+    errors = [line for line in run.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and str(tmp_path) in errors[0] and "could not be written" in errors[0], run.stderr[-1500:]
+    assert "Traceback" not in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no labels, no metrics, no temporary folder
 
 
 def test_inspect_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(labelled_drive, drive, tmp_path):

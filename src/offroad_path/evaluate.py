@@ -19,6 +19,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.labels import label_run_folders
 from offroad_path.data.manifest import manifest_folders
+from offroad_path.errors import InputError
 from offroad_path.evaluation.tables import split_run_name
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.outputs import Outputs
@@ -113,7 +114,26 @@ def check_primaries(e: DictConfig) -> None:
     scratch = {EVERY_SCRATCH_VS_PRIOR} if any(key.endswith("_vs_mean_path_prior") for key, *_ in pairs) else set()
     keys = {"uncertainty": {key for key, *_ in pairs} | scratch, "steering_from_paths": {f"{run}_vs_pilotnet" for run in e.runs}}
     for name in check_declared(e.conclusions.primaries, keys):
+        refuse_unmakeable(name, e.conclusions.primaries[name].compare)
         log.warning("primary %s (%s) is not among this run's comparisons: not measured", name, e.conclusions.primaries[name].compare)
+
+
+def refuse_unmakeable(name: str, compare: str) -> None:
+    """A primary's comparison that no grid of the registered networks and pretrainings makes (a
+    misspelt run, a reversed pair): InputError naming its key, instead of a primary not measured."""
+    from offroad_path.config.common import PRETRAININGS, _model_names
+    from offroad_path.evaluation.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
+
+    grid = [f"{model}-{pretraining}" for model in _model_names() for pretraining in PRETRAININGS()]
+    pairs = comparisons(grid) + comparisons(grid[::-1])  # evaluate.architectures' order sets a pair's
+    makeable = {f"uncertainty/{key}" for key, *_ in pairs} | {f"uncertainty/{EVERY_SCRATCH_VS_PRIOR}"}
+    makeable |= {f"steering_from_paths/{run}_vs_pilotnet" for run in grid}
+    if compare not in makeable:
+        raise InputError(
+            f"evaluate.conclusions.primaries.{name}.compare",
+            f"{compare!r} is a comparison no run makes: <model>-<pretraining> with a model of {', '.join(_model_names())} "
+            f"and a pretraining of {', '.join(PRETRAININGS())} (the report's metrics keys name the comparisons)",
+        )
 
 
 def training_runs(cfg: DictConfig) -> dict[str, str]:

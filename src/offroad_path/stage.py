@@ -26,15 +26,17 @@ from pathlib import Path
 from typing import Any
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from offroad_path.config import register_configs, validate_config
+from offroad_path.config import check_empty_mappings, register_configs, validate_config
 from offroad_path.config.common import CONF_DIR
 from offroad_path.errors import EXIT_BAD_INPUT, InputError, clear_errors, missing_extra, one_line
 from offroad_path.utils.atomic import remove_unfinished
-from offroad_path.utils.outputs import Outputs, check_outputs, claimed, release_locks
+from offroad_path.utils.lifetime import end_with_dvc
+from offroad_path.utils.outputs import Outputs, check_metrics_follow, check_outputs, claimed, release_locks
 from offroad_path.utils.parallel import stop_workers
 from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.threads import set_threads
@@ -85,6 +87,8 @@ def reads(*groups: str, writes: Callable[[DictConfig], Outputs] | None = None) -
             own = stage_config(cfg, groups, stage.__name__)
             if writes is None:
                 return stage(own)
+            if (paths := OmegaConf.select(cfg, "paths")) is not None:
+                check_metrics_follow(writes(own), paths.metrics_dir, (paths.data_dir, paths.recordings_dir))
             if trains and not is_global_zero():
                 # Another rank of a distributed training run: rank 0 holds the locks and writes the
                 # outputs; this one writes nothing, but its outputs obey the same rule.
@@ -114,8 +118,10 @@ def _stop(signum: int, frame: Any) -> None:
 
 def stop_cleanly_on_sigterm() -> None:
     """Install _stop for SIGTERM: every stage's command does; so do the project's other commands
-    that write outputs (labelling.inspect)."""
+    that write outputs (labelling.inspect). Run by `dvc repro`, the process also stops so when DVC is
+    gone (utils.lifetime): no stage outlives the repro."""
     signal.signal(signal.SIGTERM, _stop)
+    end_with_dvc()
 
 
 def objective(result: Any, metric: str | None) -> float | None:
@@ -166,8 +172,6 @@ def check_root(cfg: DictConfig) -> None:
 
 def paths_choice() -> str | None:
     """The `paths` config group chosen (default, own), when Hydra composed the config."""
-    from hydra.core.hydra_config import HydraConfig
-
     return HydraConfig.get().runtime.choices.get("paths") if HydraConfig.initialized() else None
 
 
@@ -216,6 +220,8 @@ def hydra_stage(stage: Stage) -> Callable[[], None]:
         # A stop (kill, `dvc` interrupted) deletes the temporary folders of unfinished outputs
         # instead of leaving them beside the outputs.
         stop_cleanly_on_sigterm()
+        with clear_errors():
+            check_empty_mappings(cfg, HydraConfig.get().overrides.task)
         result = run_stage(stage, cfg)
         with clear_errors():
             return objective(result, cfg.get("optimized_metric"))

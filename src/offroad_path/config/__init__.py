@@ -10,6 +10,7 @@ an error naming the key. Library code reads its settings from a composed config
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,6 +33,7 @@ from offroad_path.config.training import (
     TrainerConfig,
 )
 from offroad_path.config.world import PathsConfig, RigConfig, SynthesizeConfig, WorldConfig, check_looks_drawable
+from offroad_path.errors import InputError
 from offroad_path.utils.rules import setting, validate
 
 
@@ -112,4 +114,21 @@ def load_config(*overrides: str) -> DictConfig:
     tests), e.g. `load_config("experiment=paper").postprocess`."""
     register_configs()
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return compose("config", overrides=list(overrides))
+        cfg = compose("config", overrides=list(overrides))
+    check_empty_mappings(cfg, overrides)
+    return cfg
+
+
+def check_empty_mappings(cfg: DictConfig, overrides: Iterable[str]) -> None:
+    """`key={}` on a mapping that is not empty: Hydra merges an override into a mapping, so an empty
+    one changes nothing (`world.appearance.weights={}` would still draw the default weights, `--cfg job`
+    shows the merged result). Refused naming the key, with what to write instead."""
+    for override in overrides:
+        key, _, value = override.partition("=")
+        key = key.lstrip("+~")
+        if value.strip() == "{}" and isinstance(found := OmegaConf.select(cfg, key, default=None), DictConfig) and len(found):
+            raise InputError(
+                key,
+                "={} changes nothing: an override merges into the mapping (--cfg job shows the result); "
+                f"to leave an entry out, delete it (~{key}.<entry>) or give it weight 0",
+            )

@@ -65,6 +65,7 @@ class IngestConfig:
     list_topics: bool = MISSING
     mono: bool = MISSING  # one camera (topics.left) and poses from topics.odometry: a mono sequence
     tf_child_frame: str = MISSING  # with a TF topic as topics.odometry: the frame whose transforms are the poses
+    max_speed_mps: float = setting(positive())  # an odometry step faster than this is refused
     topics: IngestTopicsConfig = field(default_factory=IngestTopicsConfig)
     videos: IngestVideosConfig = field(default_factory=IngestVideosConfig)
     calibration: str | None = MISSING

@@ -102,6 +102,7 @@ class BagSource:
             ROS_BODY_TO_OPTICAL if self.c.body_to_camera is None else np.asarray(self.c.body_to_camera, np.float64).reshape(4, 4)
         )
         stamps, poses = self.bag.poses(topic, self.c.tf_child_frame)
+        check_speeds(stamps, poses, self.c.max_speed_mps, f"{self.path}: {topic}")
         return poses_at(stamps, poses, times, self.path, topic) @ body_to_camera
 
     def describe(self) -> dict:
@@ -119,6 +120,22 @@ class BagSource:
 
     def close(self) -> None:
         self.bag.__exit__()
+
+
+def check_speeds(stamps: np.ndarray, poses: np.ndarray, max_speed_mps: float, where: str) -> None:
+    """No step between consecutive poses (in stamp order) faster than a vehicle drives: stamps out of
+    step with their poses (shuffled, another clock's) would make a zig-zag of a straight drive."""
+    if len(stamps) < 2:
+        return
+    steps = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+    speeds = steps / np.diff(stamps)  # stamps strictly increase (bags.in_stamp_order)
+    if len(fast := np.flatnonzero(~(speeds <= max_speed_mps))):
+        i = fast[0]
+        raise InputError(
+            where,
+            f"moves {steps[i]:.3g} m in {stamps[i + 1] - stamps[i]:.3g} s at {stamps[i + 1]:.6f} s ({speeds[i]:.3g} m/s, "
+            f"more than ingest.max_speed_mps): its stamps are out of step with its poses",
+        )
 
 
 class MonoBagSource(BagSource):

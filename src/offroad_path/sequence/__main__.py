@@ -1,22 +1,35 @@
 """Check recordings before labelling them: `python -m offroad_path.sequence PATH [PATH ...]`.
 
 Opens every sequence under each PATH with the same validation the label stage uses, decodes every
-frame, and prints one line per sequence: stereo pairs, or one camera's frames (a mono sequence,
-which the label stage labels from its poses file, without occlusion). Bad input: one line naming
-the file, exit 2.
+frame, checks the poses' steps against the vehicle's top speed as the label stage does
+(label.poses.max_speed_mps, its default unless --max-speed-mps is given), and prints one line per
+sequence: stereo pairs, or one camera's frames (a mono sequence, which the label stage labels from
+its poses file, without occlusion). Bad input: one line naming the file, exit 2.
 """
 
 from __future__ import annotations
 
+from omegaconf import OmegaConf
+
+from offroad_path.config.common import CONF_DIR
 from offroad_path.errors import CommandParser, clear_errors
 from offroad_path.geometry.path import path_length
+from offroad_path.sequence.poses import max_steps, read_poses
 from offroad_path.sequence.reader import find_sequences, open_sequence
 
 
-def describe(path: str) -> list[str]:
+def label_max_speed_mps() -> float:
+    """The label stage's default label.poses.max_speed_mps (conf/label/default.yaml)."""
+    return float(OmegaConf.load(CONF_DIR / "label" / "default.yaml").poses.max_speed_mps)
+
+
+def describe(path: str, max_speed_mps: float | None = None) -> list[str]:
+    speed = label_max_speed_mps() if max_speed_mps is None else max_speed_mps
     lines = []
     for root in find_sequences(path):
         seq = open_sequence(root)
+        if seq.poses_path is not None:  # the jump check the label stage makes on a poses file
+            read_poses(seq.poses_path, expected_rows=len(seq), max_steps_m=max_steps(seq.times, len(seq), speed))
         for i in range(len(seq)):  # every frame: a truncated one in the middle must not pass
             seq.load_left(i)
             if not seq.mono:
@@ -44,10 +57,13 @@ def describe(path: str) -> list[str]:
 def main(argv: list[str] | None = None) -> None:
     parser = CommandParser(prog="python -m offroad_path.sequence", description=__doc__.splitlines()[0])
     parser.add_argument("paths", nargs="+", help="a sequence folder, or a folder of sequences")
+    parser.add_argument("--max-speed-mps", type=float, default=None, help="the top speed poses may show (default: the label stage's)")
     args = parser.parse_args(argv)
+    if args.max_speed_mps is not None and not args.max_speed_mps > 0:
+        parser.error(f"--max-speed-mps: must be above 0 m/s, got {args.max_speed_mps}")
     with clear_errors():
         for path in args.paths:
-            for line in describe(path):
+            for line in describe(path, args.max_speed_mps):
                 print(line)
 
 

@@ -138,6 +138,7 @@ def open_sequence(root: str | Path) -> Sequence:
     calibration = read_calibration(calib_path, keys, mono=mono)
     left, right = (_left_images(root / left_dir), None) if mono else _stereo_pairs(root / left_dir, root / right_dir)
     image_size = _common_size(left + (right or []))
+    _check_principal_point(calib_path, calibration, image_size)
     n = len(left)
 
     poses_path = _find_poses(root)
@@ -148,6 +149,20 @@ def open_sequence(root: str | Path) -> Sequence:
     depth = _frames_like(root / "depth", left)
     semantic = _frames_like(root / "semantic", left)
     return Sequence(root, left, right, calibration, image_size, poses, poses_path, times, meta, depth, semantic, steering)
+
+
+def _check_principal_point(path: Path, calibration: StereoCalibration, image_size: tuple[int, int]) -> None:
+    """The principal point lies in the middle half of the images (a real lens's is within a few per
+    cent of the centre): a calibration made for another image size (images resized, or cropped, after
+    calibrating) would otherwise project every label off the image, and the label stage drop them all."""
+    w, h = image_size
+    cx, cy = calibration.K[0, 2], calibration.K[1, 2]
+    if not (w / 4 <= cx <= 3 * w / 4 and h / 4 <= cy <= 3 * h / 4):
+        raise InputError(
+            path,
+            f"principal point ({cx:.1f}, {cy:.1f}) px lies outside the middle half of the {w}x{h} images: "
+            "the calibration is for another image size (resized or cropped images need their own calibration)",
+        )
 
 
 def _left_images(left_dir: Path) -> list[Path]:

@@ -80,6 +80,29 @@ def check_outputs(outputs: Outputs) -> None:
             _check_shared(Path(place), key, inputs, declared)
 
 
+def check_metrics_follow(outputs: Outputs, metrics_dir: str | Path, pipeline_dirs: Iterable[str | Path]) -> None:
+    """A run whose inputs or outputs lie outside the pipeline's folders (`pipeline_dirs`: the data and
+    recordings folders) is a run of other data: it may not write into `metrics_dir`, which holds the
+    pipeline's metrics (the committed run's, in this checkout). Refused naming the metrics key, so that
+    its metrics follow its outputs (UnsafeOutputError)."""
+    metrics = Path(metrics_dir).resolve()
+    pipeline = [Path(p).resolve() for p in pipeline_dirs if p not in (None, "")]
+    written = {**outputs.folders, **outputs.files}
+    into_metrics = [(key, p) for key, p in written.items() if Path(p).resolve().is_relative_to(metrics)]
+    if not into_metrics:
+        return
+    elsewhere = [(key, p) for key, p in written.items() if not Path(p).resolve().is_relative_to(metrics)]
+    elsewhere += [("input", p) for p in outputs.inputs if p not in (None, "")]
+    for key, path in elsewhere:
+        if not any(Path(path).resolve().is_relative_to(folder) for folder in pipeline):
+            metrics_key, metrics_path = into_metrics[0]
+            shown = f"{key}={path}" if key != "input" else f"the input {path}"
+            raise UnsafeOutputError(
+                f"{metrics_key}={metrics_path}: this run reads or writes outside the pipeline's folders ({shown}), "
+                f"so its metrics would replace the pipeline's in {metrics_dir}; set {metrics_key} beside its outputs"
+            )
+
+
 def _check_shared(place: Path, key: str, inputs: list[tuple[str, Path]], declared: list[tuple[str, Path, bool]]) -> None:
     resolved = place.resolve()
     for shown, source in inputs:
