@@ -21,7 +21,7 @@ from offroad_path.predict import run_predict
 from offroad_path.split import split
 from offroad_path.synthesize import synthesize
 from offroad_path.train import train
-from offroad_path.utils.atomic import MARKER, UnsafeOutputError
+from offroad_path.utils.atomic import MARKER, UnsafeOutputError, write_text_atomic
 from offroad_path.utils.outputs import Outputs, check_metrics_follow
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -148,10 +148,11 @@ def test_label_of_other_data_never_writes_the_pipelines_metrics(compose_config, 
     pipeline = tmp_path / "pipeline"
     metrics = pipeline / "metrics" / "label.json"
     metrics.parent.mkdir(parents=True)
-    metrics.write_text('{"labels": 1356}')
+    write_text_atomic(metrics, '{"labels": 1356}\n', "label")  # the pipeline's label run wrote it
     cfg = compose_config(f"paths.root={pipeline}", f"label.in_dir={recordings}", f"label.out_dir={tmp_path / 'elsewhere'}",
                          "label.workers=1", "mlflow.enabled=false")  # fmt: skip
-    refused(label, cfg, capsys, tmp_path, "label.metrics_path", f"the input {recordings}")
+    says = ("outside the pipeline's folders", "set label.metrics_path beside its outputs")
+    refused(label, cfg, capsys, tmp_path, "label.metrics_path", *says)
 
 
 def test_metrics_beside_the_outputs_of_other_data_are_allowed(tmp_path):

@@ -17,7 +17,7 @@ K_ROW = "700 0 320 0 0 700 180 0 0 0 1 0"
 P_RIGHT = "700 0 320 -280 0 700 180 0 0 0 1 0"  # baseline 280 / 700 = 0.4 m
 
 
-def write_frames(folder: Path, n: int, size=(64, 32), start: int = 0) -> None:
+def write_frames(folder: Path, n: int, size=(640, 360), start: int = 0) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(start)
     for i in range(start, start + n):
@@ -40,10 +40,10 @@ def sequence(tmp_path) -> Path:
 
 def test_reads_the_project_layout(sequence):
     seq = open_sequence(sequence)
-    assert len(seq) == 4 and seq.image_size == (64, 32)
+    assert len(seq) == 4 and seq.image_size == (640, 360)
     assert seq.calibration.baseline_m == pytest.approx(0.4)
     assert seq.poses[3, 2, 3] == pytest.approx(1.5)
-    assert seq.load_left(2).shape == (32, 64, 3)
+    assert seq.load_left(2).shape == (360, 640, 3)
 
 
 def test_reads_kitti_odometry_layout(tmp_path):
@@ -134,7 +134,7 @@ def test_undecodable_image_names_the_file(sequence):
 
 def test_cli_checks_recordings_and_exits_non_zero_on_bad_input(sequence):
     ok = subprocess.run([sys.executable, "-m", "offroad_path.sequence", str(sequence)], capture_output=True, text=True)
-    assert ok.returncode == 0 and "4 stereo pairs 64x32" in ok.stdout and "baseline 0.400 m" in ok.stdout
+    assert ok.returncode == 0 and "4 stereo pairs 640x360" in ok.stdout and "baseline 0.400 m" in ok.stdout
     (sequence / "calib.txt").write_text(f"{K_ROW}\n{K_ROW}\n")
     bad = subprocess.run([sys.executable, "-m", "offroad_path.sequence", str(sequence)], capture_output=True, text=True)
     assert bad.returncode == 2

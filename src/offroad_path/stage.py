@@ -87,7 +87,8 @@ def reads(*groups: str, writes: Callable[[DictConfig], Outputs] | None = None) -
             own = stage_config(cfg, groups, stage.__name__)
             if writes is None:
                 return stage(own)
-            if (paths := OmegaConf.select(cfg, "paths")) is not None:
+            if (paths := OmegaConf.select(cfg, "paths")) is not None:  # after the output rule's own refusals
+                check_outputs(writes(own))
                 check_metrics_follow(writes(own), paths.metrics_dir, (paths.data_dir, paths.recordings_dir))
             if trains and not is_global_zero():
                 # Another rank of a distributed training run: rank 0 holds the locks and writes the

@@ -84,7 +84,7 @@ def run_grid(architectures: list[str], pretrainings: list[str]) -> list[str]:
 
 def join_path(root: str, *parts: str) -> str:
     """`root`/`parts`, normalised (`./data` is `data`, `~` expanded): the paths group's resolver, so
-    that the default root `.` gives the same paths, and so the same DVC outputs, as before it existed."""
+    that the default root `.` gives exactly the paths dvc.yaml names as the stages' outputs."""
     return os.path.normpath(os.path.join(os.path.expanduser(str(root)), *map(str, parts)))
 
 

@@ -93,7 +93,7 @@ WEIGHTS = {
 class AppearanceConfig:
     """Each world's look drawn from a stream of its own (offroad_path.world.appearance)."""
 
-    enabled: bool = MISSING  # false: the single look the worlds had before looks existed, byte for byte
+    enabled: bool = MISSING  # false: one look for every world (the simplest world, for tests and tours)
     # Looks no training drive shows; every other test world is drawn from them (the held-out-appearance test set).
     held_out: list[dict[str, str]] = setting(LOOKS)
     # The training distribution: per axis, each value's weight (absent or 0: no training drive shows it); an

@@ -112,7 +112,7 @@ def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
 
         saved = pilotnet_checkpoint(checkpoint_of(name, d, seed))
         hp = saved["hyper_parameters"]
-        task = SteeringTask.from_hyperparameters(hp)
+        task = SteeringTask(**hp)
         load_weights(task, checkpoint_of(name, d, seed), saved)
         return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]), name, task.max_curvature)
     from offroad_path.inference.runners import TorchModel

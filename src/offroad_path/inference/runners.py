@@ -49,7 +49,7 @@ class TorchModel(PathModel):
             raise CheckpointError(f"{checkpoint}: not a path model checkpoint of the train stage (no 2-class network or input size)")
         self.width, self.height = int(data["width"]), int(data["height"])
         try:
-            self.task = SegmentationTask.for_inference(hp)
+            self.task = SegmentationTask(**hp)
         except TypeError as e:
             raise CheckpointError(f"{checkpoint}: its hyper-parameters do not describe a path network ({e})") from e
         load_weights(self.task, checkpoint, saved)

@@ -63,8 +63,6 @@ def fit_steering(cfg: DictConfig) -> dict:
     data = SteeringDataModule(parts, steering, cfg.seed)
     task = SteeringTask.from_config(steering)
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")
-    if steering.target == "angle":  # the run identity of an angle PilotNet, as before the curvature target existed
-        outputs = (*outputs, "target", "wheelbase_m")
     settings = {
         "block_m": cfg.split.block_m,
         "guard_m": cfg.split.guard_m,

@@ -50,8 +50,7 @@ class SteeringTask(BaseTask):
             raise ValueError(f"optimizer {optimizer!r}: valid {OPTIMIZERS}")
         super().__init__()
 
-    KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")  # every checkpoint's
-    OPTIONAL_KEYS = ("target", "lock_deg", "wheelbase_m", "optimizer")  # absent from older checkpoints: their defaults
+    KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")  # from the config as they are
 
     @classmethod
     def from_config(cls, s: DictConfig) -> SteeringTask:
@@ -59,15 +58,10 @@ class SteeringTask(BaseTask):
         vehicle = {"lock_deg": s.lock_deg, "wheelbase_m": s.wheelbase_m} if s.target == "curvature" else {}
         return cls(**{k: s[k] for k in cls.KEYS}, target=s.target, optimizer=s.optimizer, **vehicle)
 
-    @classmethod
-    def from_hyperparameters(cls, hp: dict) -> SteeringTask:
-        """From a checkpoint's hyper-parameters, of this version or an earlier one."""
-        return cls(**{k: hp[k] for k in cls.KEYS}, **{k: hp[k] for k in cls.OPTIONAL_KEYS if k in hp})
-
     def configure_optimizers(self):
         """sgd: the thesis's (momentum, the rate times lr_gamma every lr_step_epochs); adamw: AdamW
         with a 5 % warm-up and a cosine to 0 over the run (the laptop's, as the path networks')."""
-        if self.hparams.get("optimizer", "sgd") == "sgd":
+        if self.hparams.optimizer == "sgd":
             return sgd_with_step_decay(self)
         return optimizer_with_schedule(self, "adamw", "cosine", warmup=0.05)
 
@@ -75,7 +69,7 @@ class SteeringTask(BaseTask):
     def max_curvature(self) -> float | None:
         """1/m of normalised output 1 (target curvature): tan(lock) / wheelbase; None for target angle."""
         hp = self.hparams
-        return math.tan(math.radians(hp.lock_deg)) / hp.wheelbase_m if hp.get("target", "angle") == "curvature" else None
+        return math.tan(math.radians(hp.lock_deg)) / hp.wheelbase_m if hp.target == "curvature" else None
 
     def learnt(self, steering: torch.Tensor) -> torch.Tensor:
         """The normalised angles (N,) as the network learns them: unchanged, or tan(angle) / tan(lock)."""

@@ -109,18 +109,11 @@ class SegmentationTask(BaseTask):
             raise ValueError(f"optimizer {optimizer!r}, lr_schedule {lr_schedule!r}: valid {OPTIMIZERS} and {SCHEDULES}")
         super().__init__()
 
-    @classmethod
-    def for_inference(cls, hp: dict) -> SegmentationTask:
-        """From a checkpoint's hyper-parameters, of this version or an earlier one: the optimiser's
-        settings, which inference does not use, are filled in or left out."""
-        own = {"lr_milestones": [], "lr_gamma": 0.1, "lr_warmup": 0.0} | {k: v for k, v in hp.items() if k != "lr_step_epochs"}
-        return cls(**own)
-
     def configure_optimizers(self):
         return optimizer_with_schedule(self)
 
     def configure_models(self) -> None:
-        self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width, self.hparams.get("batch_norm"))
+        self.model = build_model(self.hparams.model, self.hparams.num_classes, self.hparams.width, self.hparams.batch_norm)
         if self.hparams.channels_last:
             self.model = self.model.to(memory_format=torch.channels_last)
 

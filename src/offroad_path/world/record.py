@@ -119,9 +119,9 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, test_set: str | 
         "frames": len(world.poses),
         "world": world_settings(cfg),  # the drive stage and the slip targets rebuild the world from these and the seed
     } | ({meta_keys.SPLIT: meta_keys.HELD_OUT, meta_keys.TEST_SET: test_set} if held_out else {})
-    if world.look is not None:  # only then: a world without a look keeps its meta.json byte for byte
+    if world.look is not None:  # absent: the world's single original look (world.appearance.enabled=false)
         meta["appearance"] = asdict(world.look)
-    if world.slip is not None:  # only then: a world without slip keeps today's meta.json byte for byte
+    if world.slip is not None:  # absent: no slip, steering.txt is the bicycle model's angle
         meta["steering"] = (
             "the driver's input under slip (world.slip): bicycle-model wheel angle of the true curvature "
             "over the yaw-rate factor, over max_steering_deg"
