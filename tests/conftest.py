@@ -38,6 +38,14 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=seconds, reverse=True)  # stable: the rest keep pytest's order
 
 
+@pytest.fixture(scope="session", autouse=True)
+def mlflow_store_outside_the_checkout(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """A stage run with the default mlflow settings logs to $MLFLOW_TRACKING_URI, else to mlflow.db
+    where it runs (the checkout, for the suite): one store of the run's own instead, read by the
+    commands the tests start too. A test that names its store (mlflow.tracking_uri=...) keeps it."""
+    os.environ.setdefault("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path_factory.getbasetemp() / 'mlflow.db'}")
+
+
 @pytest.fixture(autouse=True)
 def restore_threads() -> Iterator[None]:
     """Stages run in this process set its threads (offroad_path.utils.threads): each test starts as the session did."""

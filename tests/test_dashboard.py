@@ -24,11 +24,14 @@ import mlflow.models
 import pytest
 from helpers import git
 
-# What a DVC stage runs here: the parent run its MLflow runs would get, into the stage's output.
+# What a DVC stage runs here: the parent run its MLflow runs would get, a second of work, the end the
+# stage runner gives the parent (stage.run_stage), and the time it ended, into the stage's output.
 STAGE = (
-    "from omegaconf import OmegaConf; from offroad_path.utils.tracking import pipeline_parent, dvc_repro_process; import json, sys;"
+    "from omegaconf import OmegaConf; from offroad_path.utils.tracking import pipeline_parent, dvc_repro_process, end_pipeline_parent;"
+    "import json, sys, time;"
     "cfg = OmegaConf.create({{'mlflow': {{'enabled': True, 'experiment': 'offroad-path', 'tracking_uri': 'sqlite:///{db}'}}}});"
-    "json.dump({{'parent': pipeline_parent(cfg), 'repro': dvc_repro_process()}}, open(sys.argv[1], 'w'))"
+    "parent = pipeline_parent(cfg); time.sleep(1); end_pipeline_parent(cfg, failed=False);"
+    "json.dump({{'parent': parent, 'repro': dvc_repro_process(), 'ended_ms': time.time() * 1000}}, open(sys.argv[1], 'w'))"
 )
 
 
@@ -42,11 +45,15 @@ def test_the_stages_of_one_dvc_repro_share_one_parent_run(tmp_path):
     (repo / "dvc.yaml").write_text(json.dumps({"stages": stages}))
     subprocess.run([sys.executable, "-m", "dvc", "repro", "-q"], cwd=repo, check=True, capture_output=True)
     first, second = (json.loads((repo / f"{name}.json").read_text()) for name in ("first", "second"))
-    assert first["parent"] and first == second  # one repro: one parent, found by the second stage
+    assert first["parent"] and (first["parent"], first["repro"]) == (second["parent"], second["repro"])  # found by the second stage
     with sqlite3.connect(db) as store:
-        (name,) = store.execute("select name from runs where run_uuid = ?", (first["parent"],)).fetchone()
+        name, status, start, end = store.execute(
+            "select name, status, start_time, end_time from runs where run_uuid = ?", (first["parent"],)
+        ).fetchone()
         (repro,) = store.execute("select value from tags where run_uuid = ? and key = 'dvc_repro'", (first["parent"],)).fetchone()
-    assert name.startswith("dvc repro ") and repro == first["repro"]
+    assert name.startswith("dvc repro ") and repro == first["repro"] and status == "FINISHED"
+    # the parent spans the repro: from the first stage's start to the last stage's end (2 s of work)
+    assert first["ended_ms"] < end <= second["ended_ms"] and end - start >= 2000
     subprocess.run([sys.executable, "-m", "dvc", "repro", "-q", "-f"], cwd=repo, check=True, capture_output=True)
     assert json.loads((repo / "first.json").read_text())["parent"] != first["parent"]  # the next repro: a parent of its own
 
@@ -140,3 +147,23 @@ def test_the_dashboard_over_rest_shows_the_model_its_datasets_and_the_best_versi
         (tensor,) = signature.inputs.inputs
         assert tuple(tensor.shape[1:]) == (3, 48, 64)  # (N, 3, H, W): the tiny preset's input
         assert tuple(signature.outputs.inputs[0].shape[1:]) == (2, 48, 64)  # path and not, per pixel
+
+
+def test_synthesize_and_split_each_log_a_run(compose_config, labelled_drive, tmp_path):
+    """Every stage shows in the dashboard: the two that logged nothing before, each with its settings and counts."""
+    from offroad_path.split import split
+    from offroad_path.synthesize import synthesize
+
+    db = tmp_path / "mlflow.db"
+    store = f"mlflow.tracking_uri=sqlite:///{db}"
+    synthesize(compose_config("synthesize.sequences=1", "world.frames=3", "world.width=160", "world.height=96", "synthesize.workers=1",
+                              "synthesize.test_worlds.min_blocks=0", f"synthesize.out_dir={tmp_path / 'synthetic'}", store))  # fmt: skip
+    summary = split(compose_config(f"split.labels_dir={labelled_drive}", f"split.out_dir={tmp_path / 'split'}", store))
+    with sqlite3.connect(db) as found:
+        runs = dict(found.execute("select name, run_uuid from runs where status = 'FINISHED'").fetchall())
+        metric = dict(found.execute("select key || ':' || r.name, value from metrics m join runs r on m.run_uuid = r.run_uuid").fetchall())
+        params = {k for (k,) in found.execute("select key from params where run_uuid = ?", (runs["synthesize"],))}
+    assert {"synthesize", "split"} <= set(runs)
+    assert metric["sequences:synthesize"] == 1 and metric["frames:synthesize"] == 3
+    assert metric["frames:split"] == summary["frames"] and metric["train:split"] == summary["samples"]["train"]
+    assert {"sequences", "world.frames", "world.width"} <= params

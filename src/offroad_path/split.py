@@ -21,6 +21,7 @@ from offroad_path.sequence import meta
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory
 from offroad_path.utils.outputs import Outputs
+from offroad_path.utils.tracking import stage_run
 
 log = logging.getLogger("offroad_path.split")
 
@@ -55,7 +56,7 @@ def outputs(cfg: DictConfig) -> Outputs:
     return Outputs("split", folders={"split.out_dir": cfg.split.out_dir}, inputs=label_run_folders(cfg.split.labels_dir))
 
 
-@reads("split", writes=outputs)
+@reads("split", "mlflow", writes=outputs)
 def split(cfg: DictConfig) -> dict:
     split_cfg = cfg.split
     frames, samples = labelled_frames(Path(split_cfg.labels_dir))
@@ -64,7 +65,7 @@ def split(cfg: DictConfig) -> dict:
     parts, guarded = split_frames(frames, split_cfg)
     counts = {}
     listed = [split_cfg.labels_dir, *(p for sample in samples.values() for p in (sample.image, sample.label))]
-    with atomic_directory(split_cfg.out_dir, "split", key="split.out_dir") as tmp:
+    with stage_run(cfg, "split") as run, atomic_directory(split_cfg.out_dir, "split", key="split.out_dir") as tmp:
         for name, part in parts.items():
             rows = []
             for frame in part:
@@ -88,6 +89,10 @@ def split(cfg: DictConfig) -> dict:
             "data_root": data_root(listed),
         }
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        if run is not None:
+            import mlflow
+
+            mlflow.log_metrics({"frames": len(frames), "guarded_out": guarded, "test_blocks": test_blocks, **counts})
     log.info(
         "split %d labelled frames: %s samples%s, %d training frames left out beside held-out ones; test: %d blocks of driving%s",
         len(frames),

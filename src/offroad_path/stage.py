@@ -40,6 +40,7 @@ from offroad_path.utils.outputs import Outputs, check_metrics_follow, check_outp
 from offroad_path.utils.parallel import stop_workers
 from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.threads import set_threads
+from offroad_path.utils.tracking import end_pipeline_parent
 
 log = logging.getLogger("offroad_path")
 
@@ -143,7 +144,15 @@ def run_stage(stage: Stage, cfg: DictConfig) -> Any:
         validate_config(cfg, getattr(stage, "reads", None))
         check_root(cfg)
         set_threads(cfg.threads)
-        return stage(cfg)
+        if "mlflow" not in getattr(stage, "reads", ()) or not cfg.mlflow.enabled:
+            return stage(cfg)
+        failed = True
+        try:
+            result = stage(cfg)
+            failed = False
+            return result
+        finally:  # under `dvc repro`: the repro's MLflow parent run ends with its last stage
+            end_pipeline_parent(cfg, failed)
 
 
 def check_root(cfg: DictConfig) -> None:

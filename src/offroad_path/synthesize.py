@@ -11,11 +11,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from offroad_path.stage import hydra_stage, log, reads
 from offroad_path.utils.atomic import atomic_directory
 from offroad_path.utils.outputs import Outputs
+from offroad_path.utils.tracking import flatten, stage_run
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.held_out import choose_held_out_worlds
 from offroad_path.world.record import record_sequences, sequence_seed
@@ -25,10 +26,10 @@ def outputs(cfg: DictConfig) -> Outputs:
     return Outputs("synthesize", folders={"synthesize.out_dir": cfg.synthesize.out_dir})
 
 
-@reads("synthesize", "world", writes=outputs)
+@reads("synthesize", "world", "mlflow", writes=outputs)
 def synthesize(cfg: DictConfig) -> list[dict]:
     out_dir = Path(cfg.synthesize.out_dir)
-    with atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:
+    with stage_run(cfg, "synthesize") as run, atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:
         synthesize_cfg = cfg.synthesize
         held_out = choose_held_out_worlds(cfg.world, synthesize_cfg.test_worlds, synthesize_cfg.seed, synthesize_cfg.workers)
         drives = [(f"seq_{i:03d}", sequence_seed(synthesize_cfg.seed, i), False) for i in range(synthesize_cfg.sequences)]
@@ -40,8 +41,13 @@ def synthesize(cfg: DictConfig) -> list[dict]:
         ]
         report = {"classes": list(CLASS_NAMES), "sequences": summaries, "test_worlds": tested}
         (tmp / "summary.json").write_text(json.dumps(report, indent=2) + "\n")
-    frames = sum(s["frames"] for s in summaries)
-    distance = sum(s["distance_m"] for s in summaries)
+        frames = sum(s["frames"] for s in summaries)
+        distance = sum(s["distance_m"] for s in summaries)
+        if run is not None:
+            import mlflow
+
+            mlflow.log_params(flatten({"world": OmegaConf.to_container(cfg.world, resolve=True)}))
+            mlflow.log_metrics({"sequences": len(summaries), "test_worlds": len(tested), "frames": frames, "distance_m": distance})
     log.info(
         "wrote %d sequences, %d of them held-out test worlds (%d stereo frames, %.0f m driven) to %s",
         len(summaries),

@@ -11,6 +11,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from offroad_path.utils.lifetime import dvc_ancestor
+
 # The experiment's kind: model training (runs, models, metrics), not GenAI development (traces).
 # MLflow 3.17's UI opens experiments by its sidebar switch instead (?workflowType=machine_learning,
 # README "The dashboard"); the tag is what MLflow's APIs and UIs without that switch read.
@@ -92,25 +94,20 @@ def multirun_parent(cfg: DictConfig) -> str | None:
 
 
 def dvc_repro_process() -> str | None:
-    """`<host>-<pid>-<start>` of the `dvc repro` (or `dvc exp run`) this process runs under, found
-    among its ancestors (Linux /proc); None outside DVC. Every stage of one repro gets the same."""
-    pid = os.getppid()
-    while pid > 1:
-        try:
-            command = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            return None
-        names = [Path(c.decode(errors="replace")).name for c in command[:3]]
-        if "dvc" in names and any(c in (b"repro", b"exp") for c in command):
-            return f"{os.uname().nodename}-{pid}-{fields[19]}"  # field 22 of stat: the start time, in clock ticks after boot
-        pid = int(fields[1])
-    return None
+    """`<host>-<pid>-<start>` of the `dvc repro` (or `dvc exp run`) this process runs under
+    (utils.lifetime finds it); None outside DVC. Every stage of one repro gets the same."""
+    found = dvc_ancestor()
+    return None if found is None else f"{os.uname().nodename}-{found[0]}-{found[1]}"
 
 
 def pipeline_parent(cfg: DictConfig) -> str | None:
     """Under `dvc repro`: the id of one parent run for the whole repro (made by its first stage that
-    logs), so that the dashboard shows each repro's stages together; None outside DVC."""
+    logs, starting then), so that the dashboard shows each repro's stages together; None outside DVC.
+    Every stage that logs ends it again as it ends (end_pipeline_parent): it ends with the repro."""
+    return _pipeline_parent(cfg, create=True)
+
+
+def _pipeline_parent(cfg: DictConfig, create: bool) -> str | None:
     repro = dvc_repro_process()
     if repro is None or not cfg.mlflow.enabled:
         return None
@@ -121,8 +118,20 @@ def pipeline_parent(cfg: DictConfig) -> str | None:
     found = client.search_runs([experiment], filter_string=f"tags.dvc_repro = '{repro}'", max_results=1)
     if found:
         return found[0].info.run_id
+    if not create:
+        return None
     parent = client.create_run(
         experiment, run_name=f"dvc repro {time.strftime('%Y-%m-%d %H:%M')}", tags={"dvc_repro": repro, "stage": "dvc repro"}
     )
-    client.set_terminated(parent.info.run_id)
     return parent.info.run_id
+
+
+def end_pipeline_parent(cfg: DictConfig, failed: bool) -> None:
+    """The repro's parent run (when a stage of it has logged) ends now: the last stage's end is the
+    repro's. FAILED when this stage failed, which stops the repro."""
+    parent = _pipeline_parent(cfg, create=False)
+    if parent is None:
+        return
+    from mlflow.tracking import MlflowClient
+
+    MlflowClient(tracking_uri(cfg.mlflow)).set_terminated(parent, "FAILED" if failed else "FINISHED", end_time=int(time.time() * 1000))
