@@ -34,7 +34,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
-from transfer_real import label_recording
+from common import label_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 TEST_M = (45.0, 75.0)  # the held-out stretch of kitti00_mono: its f0 lie this far along the drive

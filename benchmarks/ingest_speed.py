@@ -12,7 +12,6 @@ epipolar check, preview). Then the label stage runs on the ingested sequence wit
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -20,7 +19,6 @@ from pathlib import Path
 import cv2
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
 
 from raw_rig import body_poses, raw_frames, raw_rig, write_bag, write_videos  # noqa: E402
 

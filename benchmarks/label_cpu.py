@@ -16,7 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from offroad_path.utils.kernels import openblas_cores, without_vector_kernels
+from common import openblas_cores, without_vector_kernels
 
 
 def main() -> None:

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from seed_spread import key, test_counts
+from common import key, test_counts
 
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import read_manifest

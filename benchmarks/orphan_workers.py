@@ -24,8 +24,7 @@ import time
 import uuid
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from helpers import tagged_processes
+from common import tagged_processes
 
 
 def orphan_lifetime(recordings: Path, delay_s: float, busy: int) -> float:

@@ -28,32 +28,10 @@ import threading
 import time
 from pathlib import Path
 
-BUSY = "import torch\nx = torch.randn(1024, 1024)\nwhile True:\n    x = (x @ x).clamp(-1, 1)\n"
+from common import BUSY, descendants, high_water_kb
+
 STAGE = re.compile(r"^Running stage '([^']+)'")
 PEAK = re.compile(r"^#peak (\S+) (\d+)$")
-
-
-def descendants(root: int) -> list[int]:
-    """Every process below `root` (Linux /proc)."""
-    children: dict[int, list[int]] = {}
-    for status in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = status.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        children.setdefault(int(fields[1]), []).append(int(status.parent.name))
-    found, todo = [], [root]
-    while todo:
-        found += (kids := children.get(todo.pop(), []))
-        todo += kids
-    return found
-
-
-def high_water_kb(pid: int) -> int:
-    try:
-        return next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines() if line.startswith("VmHWM:"))
-    except (OSError, StopIteration):
-        return 0
 
 
 class PeakMemory(threading.Thread):

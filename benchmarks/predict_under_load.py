@@ -20,7 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
-BUSY = "import torch\nx = torch.randn(1024, 1024)\nwhile True:\n    x = (x @ x).clamp(-1, 1)\n"
+from common import BUSY
+
 SETTINGS = ("free", "all", "1")
 
 

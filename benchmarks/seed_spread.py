@@ -45,15 +45,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from common import PER_SEED, compare, iou, key, mae, merge, test_counts
 
-from offroad_path.data.loading import load_labels, load_maps
-from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
+from offroad_path.data.loading import load_labels
+from offroad_path.data.manifest import read_manifest
 from offroad_path.evaluation.metrics import counts, mean_path
-from offroad_path.statistics.noninferiority import PER_SEED, compare, iou, mae, merge
-
-
-def key(sample: Sample) -> str:
-    return f"{sample.sequence}/{sample.f0}/{int(sample.mirrored)}"
 
 
 def yardstick_labels(root: Path | None) -> dict[str, str] | None:
@@ -61,20 +57,6 @@ def yardstick_labels(root: Path | None) -> dict[str, str] | None:
     if root is None:
         return None
     return {key(s): str(root / s.label) for s in read_manifest(root / "data" / "split" / "test.csv")}
-
-
-def test_counts(run_dir: Path, yardstick: dict[str, str] | None, threshold: float = 0.5) -> dict[str, list[int]]:
-    """Per test image (by frame key) the counts tp, fp, tn, fn of the run's maps, against its own test
-    labels or, with a yardstick, against those (maps resized bilinearly to their size; frames it lacks left out)."""
-    rows = read_predictions_manifest(run_dir / "predictions" / "manifest.csv", "train")
-    if yardstick is not None:
-        rows = [(replace(s, label=yardstick[key(s)]), p) for s, p in rows if key(s) in yardstick]
-    samples, labels = [s for s, _ in rows], load_labels([s for s, _ in rows])
-    maps = load_maps([p for _, p in rows])
-    if maps.shape != labels.shape:
-        maps = np.stack([cv2.resize(m, labels.shape[:0:-1], interpolation=cv2.INTER_LINEAR) for m in maps])
-    per_image = counts(maps, labels, threshold)
-    return {key(s): c.tolist() for s, c in zip(samples, per_image, strict=True)}
 
 
 def prior_counts(yardstick: dict[str, str] | None, threshold: float = 0.5) -> dict[str, list[int]]:

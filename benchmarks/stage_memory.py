@@ -24,7 +24,7 @@ import threading
 import time
 from pathlib import Path
 
-from pipeline_time import descendants, high_water_kb
+from common import descendants, high_water_kb
 
 # (name, module, its own arguments): the stages of dvc.yaml, one run of each kind.
 STAGES = {

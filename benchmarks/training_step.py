@@ -14,25 +14,9 @@ import argparse
 import time
 
 import torch
-import torch.nn.functional as F
+from common import step_ms
 
 from offroad_path.models import MODELS, build_model
-
-
-def step_ms(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, steps: int) -> float:
-    optimiser = torch.optim.SGD(net.parameters(), lr=0.01, momentum=0.9)
-
-    def step() -> None:
-        optimiser.zero_grad()
-        F.cross_entropy(net(x), y).backward()
-        optimiser.step()
-
-    for _ in range(3):
-        step()
-    start = time.perf_counter()
-    for _ in range(steps):
-        step()
-    return (time.perf_counter() - start) / steps * 1000
 
 
 def main() -> None:

@@ -24,35 +24,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from common import label_recording
 
 ROOT = Path(__file__).resolve().parents[1]
-FOOTPRINT = (
-    "label.footprint.width_m=1.8",
-    "label.footprint.front_m=2.0",
-    "label.footprint.rear_m=-2.7",
-    "label.footprint.camera_height_m=1.65",
-)
-
-
-def label_recording(recording: Path, out: Path, *overrides: str) -> Path:
-    """The label stage on a KITTI recording (one camera or two) from its true poses, occlusion off
-    (a recording of one camera has no depth to test it by; a stereo one is labelled alike)."""
-    from offroad_path.config import load_config
-    from offroad_path.label import label
-
-    cfg = load_config(
-        f"label.in_dir={recording}",
-        f"label.out_dir={out}",
-        f"label.metrics_path={out.parent / (out.name + '.json')}",
-        "label.poses.source=file",
-        "label.occlusion.enabled=false",
-        "label.workers=1",
-        "mlflow.enabled=false",
-        *FOOTPRINT,
-        *overrides,
-    )
-    label(cfg)
-    return out
 
 
 def colour_row(frames, resampling):

@@ -24,12 +24,13 @@ import sys
 import time
 from pathlib import Path
 
+from common import BUSY
+
 HERE = Path(__file__).resolve().parent
-BUSY = "import torch\nx = torch.randn(1024, 1024)\nwhile True:\n    x = (x @ x).clamp(-1, 1)\n"
 STEPS = """
 import hashlib, sys, torch
 sys.path.insert(0, {here!r})
-from training_step import step_ms
+from common import step_ms
 from offroad_path.config import load_config
 from offroad_path.models import build_model
 torch.set_num_threads({threads})

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from common import tagged_processes  # noqa: F401  (benchmarks/common.py: the tests' import of it)
 
 from offroad_path.stage import run_stage
 
@@ -72,21 +73,6 @@ def user_folder(path: Path) -> Path:
 def label_cfg(compose_config, in_dir: Path, tmp_path: Path, *overrides: str):
     return compose_config(f"label.in_dir={in_dir}", f"label.out_dir={tmp_path / 'labels'}", f"label.metrics_path={tmp_path / 'm.json'}",
                           "label.workers=1", "mlflow.enabled=false", *overrides)  # fmt: skip
-
-
-def tagged_processes(tag: str) -> list[int]:
-    """Live processes started with OFFROAD_TEST_TAG=tag in their environment (workers inherit it,
-    and keep it when their parent dies and they are re-parented)."""
-    found = []
-    for environ in Path("/proc").glob("[0-9]*/environ"):
-        try:
-            if f"OFFROAD_TEST_TAG={tag}".encode() in environ.read_bytes().split(b"\0"):
-                state = (environ.parent / "stat").read_text().split(")")[-1].split()[0]
-                if state != "Z":
-                    found.append(int(environ.parent.name))
-        except OSError:
-            continue
-    return found
 
 
 GIT_IDENTITY = {"GIT_AUTHOR_NAME": "test", "GIT_AUTHOR_EMAIL": "test@example.com", "GIT_COMMITTER_NAME": "test",

@@ -1,15 +1,14 @@
 """Every stage of dvc.yaml depends on all the code it runs: each module its entry point imports,
 directly or not (imports inside functions included), lies under one of the stage's deps, and the
-deps are what offroad_path.utils.dvc_deps generates. A missing dep means `dvc repro` keeps a stale
+deps are what tools/dvc_deps.py generates. A missing dep means `dvc repro` keeps a stale
 output after a code change."""
 
 from __future__ import annotations
 
 import pytest
 import yaml
+from dvc_deps import code_deps, has_code, imported_files, main, rewrite
 from helpers import ROOT
-
-from offroad_path.utils.dvc_deps import code_deps, has_code, imported_files, main, rewrite
 
 DVC_YAML = yaml.safe_load((ROOT / "dvc.yaml").read_text())
 STAGES = DVC_YAML["stages"]
@@ -26,7 +25,7 @@ def test_the_stage_depends_on_every_module_it_imports(stage):
 
 
 def test_dvc_yaml_holds_the_generated_code_deps():
-    assert main(["--check"]) == 0, "run: python -m offroad_path.utils.dvc_deps"
+    assert main(["--check"]) == 0, "run: python tools/dvc_deps.py"
 
 
 def test_the_generator_lists_a_new_import_and_drops_a_removed_one(tmp_path):

@@ -127,7 +127,7 @@ def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc
     import yaml
     from helpers import ROOT
 
-    for item in ("src", "conf", "dvc.yaml"):
+    for item in ("src", "conf", "tools", "dvc.yaml"):
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, tmp_path / item)
     package = tmp_path / "src" / "offroad_path"
     (package / "hello.py").write_text(HELLO_STAGE)
@@ -157,6 +157,6 @@ def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc
     assert refused.returncode == 2 and "hello.times" in refused.stderr, refused.stderr[-800:]
     listed = run("-c", "from offroad_path.stage import stage_modules; print(stage_modules())")
     assert "'hello'" in listed.stdout, listed.stderr[-800:]
-    assert run("-m", "offroad_path.utils.dvc_deps").returncode == 0
+    assert run("tools/dvc_deps.py").returncode == 0
     deps = yaml.safe_load((tmp_path / "dvc.yaml").read_text())["stages"]["hello"]["deps"]
     assert "src/offroad_path/hello.py" in deps and "src/offroad_path/stage.py" in deps

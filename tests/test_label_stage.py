@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from common import openblas_cores, without_vector_kernels
 from helpers import file_hashes
 
 from offroad_path.config.labelling import OdometryConfig
@@ -24,7 +25,6 @@ from offroad_path.labelling.compare import compare
 from offroad_path.odometry.trajectory import drift, run_odometry
 from offroad_path.sequence import open_sequence
 from offroad_path.utils.atomic import MARKER
-from offroad_path.utils.kernels import openblas_cores, without_vector_kernels
 
 
 def label_config(compose_config, in_dir: Path, out: Path, *overrides: str):

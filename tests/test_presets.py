@@ -116,11 +116,11 @@ def test_every_trained_network_writes_one_folder_per_seed_and_evaluate_reads_the
 
 def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc_yaml(compose_config):
     """experiment=gpu: every look alike, ten times the drives, full-width networks on larger inputs, every core
-    working; gpu/dvc.yaml is dvc.yaml's stages under it (made by utils.scaled_pipeline), its grid gpu/params.yaml."""
+    working; gpu/dvc.yaml is dvc.yaml's stages under it (made by tools/scaled_pipeline.py), its grid gpu/params.yaml."""
     import yaml
+    from scaled_pipeline import ROOT, render
 
     from offroad_path.looks import axis_values
-    from offroad_path.utils.scaled_pipeline import ROOT, render
 
     laptop, gpu = compose_config(), compose_config("experiment=gpu")
     assert all(gpu.world.appearance.weights[axis][value] > 0 for axis in gpu.world.appearance.weights for value in axis_values()[axis])
@@ -129,7 +129,7 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     assert gpu.synthesize.workers == gpu.label.workers == gpu.drive.workers == 0  # 0: one per core
     assert yaml.safe_load((ROOT / "conf" / "experiment" / "gpu.yaml").read_text())["threads"] == "all"  # (the tests' config sets 1)
     assert {"no_track", "grass_track"} <= set(gpu.synthesize.test_worlds.stress_sets)  # in its training distribution
-    assert (ROOT / "gpu" / "dvc.yaml").read_text() == render(), "gpu/dvc.yaml is stale: python -m offroad_path.utils.scaled_pipeline"
+    assert (ROOT / "gpu" / "dvc.yaml").read_text() == render(), "gpu/dvc.yaml is stale: python tools/scaled_pipeline.py"
     pipeline, main = yaml.safe_load(render()), yaml.safe_load((ROOT / "dvc.yaml").read_text())
     assert list(pipeline["stages"]) == list(main["stages"])
     for name, stage in pipeline["stages"].items():

@@ -14,12 +14,12 @@ import time
 import cv2
 import numpy as np
 import pytest
+from common import openblas_cores, without_vector_kernels
 from hydra.errors import ConfigCompositionException
 
 from offroad_path.sequence import open_sequence
 from offroad_path.synthesize import synthesize
 from offroad_path.utils.atomic import MARKER, atomic_directory
-from offroad_path.utils.kernels import openblas_cores, without_vector_kernels
 from offroad_path.world.classes import CLASS_NAMES
 
 TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.height=96", "synthesize.workers=2",
