@@ -131,23 +131,10 @@ def tiny_repo(repo: Path) -> Path:
     """The project's pipeline in a fresh git + DVC repo at `repo`, on a tiny preset."""
     for item in ("conf", "src", "dvc.yaml", ".dvcignore"):
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
-    # Tiny but real: 12 frames of two drives and a test world, labels of the next 4 m every metre, one epoch; one
-    # thread per stage, since two pipelines run at once (tests/test_pipeline_dvc.py).
-    tiny = {
-        "world": {"frames": 12, "width": 256, "height": 144, "max_distance_m": 40.0},  # a smaller ground grid: worlds build twice as fast
-        "synthesize": {"sequences": 2, "test_worlds": {"min_blocks": 3, "per_stress": 1, "development_blocks": 1,
-                                                     "stress_sets": ["held_out_look"]}},  # main, stress and development worlds
-        "label": {"distance_m": 4.0, "stride_m": 1.0}, "split": {"block_m": 2.0, "guard_m": 1.0},
-        "data": {"width": 64, "height": 48, "batch_size": 2}, "model": {"width": 0.125}, "trainer": {"max_epochs": 1},
-        "pretrain": {"max_epochs": 1}, "steering": {"max_epochs": 1},
-        "evaluate": {"temporal": {"enabled": False}},  # run three times here; tests/test_temporal.py scores it once
-        # One policy of each kind, 4 m from two starts in the test world (tests/test_drive_stage.py drives more).
-        "drive": {"arguments": {"steering": ["unet-segmentation", "pilotnet", "oracle"],
-                                "vehicle": ["unet-segmentation", "pilotnet_curvature"], "traction": ["unet-segmentation", "pilotnet_slip"]},
-                  "worlds": 1, "starts_per_world": 2, "length_m": 4.0, "respawn_m": 1.0, "width": 128, "height": 72, "video": False,
-                  "bootstrap": {"resamples": 100}},
-        "threads": 1, "experiment_name": "tiny",
-    }  # fmt: skip
+    # The tour's preset (conf/experiment/tour.yaml: 12 frames of two drives and a test world, one epoch),
+    # with one thread per stage, since two pipelines run at once (tests/test_pipeline_dvc.py).
+    tiny = yaml.safe_load((ROOT / "conf" / "experiment" / "tour.yaml").read_text()) | {"threads": 1, "experiment_name": "tiny"}
+    del tiny["evaluate"]["architectures"]  # every network of the grid, as conf/evaluate/default.yaml lists them
     (repo / "conf" / "experiment" / "tiny.yaml").write_text("# @package _global_\n" + yaml.safe_dump(tiny))
     primary = repo / "conf" / "config.yaml"
     text = primary.read_text()

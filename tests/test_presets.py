@@ -138,3 +138,22 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
         assert outputs and all(o.startswith(("gpu/data/", "gpu/metrics/")) for o in outputs), name
     grid = yaml.safe_load((ROOT / "gpu" / "params.yaml").read_text())
     assert {key: list(gpu.evaluate[key]) for key in grid} == grid
+
+
+def test_the_tour_is_every_stage_on_tiny_worlds_into_its_own_folder(compose_config):
+    """tour/dvc.yaml: dvc.yaml's stages under experiment=tour (the suite's tiny repro runs the same
+    preset, tests/test_pipeline_dvc.py), outputs under tour/, an MLflow experiment of its own."""
+    import yaml
+    from scaled_pipeline import ROOT, render
+
+    tour = compose_config("experiment=tour")
+    assert (ROOT / "tour" / "dvc.yaml").read_text() == render("tour"), "tour/dvc.yaml is stale: python tools/scaled_pipeline.py"
+    pipeline, main = yaml.safe_load(render("tour")), yaml.safe_load((ROOT / "dvc.yaml").read_text())
+    assert list(pipeline["stages"]) == list(main["stages"])
+    for name, stage in pipeline["stages"].items():
+        assert "experiment=tour paths.root=tour" in stage["cmd"], name
+        outputs = [next(iter(o)) if isinstance(o, dict) else o for key in ("outs", "metrics") for o in stage.get(key, [])]
+        assert outputs and all(o.startswith(("tour/data/", "tour/metrics/")) for o in outputs), name
+    grid = yaml.safe_load((ROOT / "tour" / "params.yaml").read_text())
+    assert {key: list(tour.evaluate[key]) for key in grid} == grid
+    assert tour.mlflow.experiment != compose_config().mlflow.experiment and tour.trainer.max_epochs == 1

@@ -70,6 +70,7 @@ class EvaluateConfig:
     bootstrap: BootstrapConfig = field(default_factory=BootstrapConfig)
     conclusions: ConclusionsConfig = field(default_factory=ConclusionsConfig)
     real_labels_dir: str | None = MISSING  # a label run of real footage: every network scored on it too (null: none)
+    notice: str | None = MISSING  # a line above results.md and in the metrics (a smoke run says so); null: none
     colour_baseline_pixels: int = setting(at_least(0))  # training pixels per frame of the colour baseline (0: none)
     threshold: float = setting(between(0, 1))  # path where C > threshold
     pr_thresholds: int = setting(at_least(2))

@@ -190,7 +190,8 @@ def write_report(e: DictConfig, test: TestSet, sections: list[Section], table: l
     """evaluate.out_dir (results.md from the sections in order, results.csv of `table`, figures/),
     evaluate.plots_dir (each run's precision-recall curve), evaluate.metrics_path."""
     with atomic_directory(e.out_dir, "evaluate", key="evaluate.out_dir") as tmp:
-        (tmp / "results.md").write_text("".join(section.markdown() for section in sections))
+        notice = f"> **{e.notice}**\n\n" if e.notice else ""
+        (tmp / "results.md").write_text(notice + "".join(section.markdown() for section in sections))
         (tmp / "results.csv").write_text(csv_text(table))
         for name, image in figures.items():
             save_png(tmp / "figures" / name, image)
@@ -198,4 +199,5 @@ def write_report(e: DictConfig, test: TestSet, sections: list[Section], table: l
         for run, curve in test.curves.items():
             lines = ["threshold,precision,recall"] + [f"{t:.4f},{p:.6f},{r:.6f}" for t, p, r in zip(*curve.values(), strict=True)]
             (tmp / f"{run}.csv").write_text("\n".join(lines) + "\n")
-        write_text_atomic(e.metrics_path, json.dumps(report_metrics(sections), indent=2) + "\n", "evaluate")
+        metrics = ({"notice": e.notice} if e.notice else {}) | report_metrics(sections)
+        write_text_atomic(e.metrics_path, json.dumps(metrics, indent=2) + "\n", "evaluate")
