@@ -37,3 +37,22 @@ def test_every_stated_config_value_is_the_composed_configs():
             elif str(config[found[0]]) != stated and not (isinstance(config[found[0]], float) and float(stated) == config[found[0]]):
                 wrong.append(f"{page.name}: `{key}` ({stated}) but {found[0]} is {config[found[0]]}")
     assert not wrong, wrong
+
+
+def test_every_file_the_docs_and_configs_name_exists():
+    """A name leads to the code: every `src/...`, `conf/...`, `tools/...`, `benchmarks/...` or `tests/...`
+    path written in the README, docs/, conf/ and the code's docstrings is a file or folder of this
+    checkout (history pages excepted: they name what was; extending.md's example network, mynet, too)."""
+    named = re.compile(r"(?<![\w/.-])((?:src|conf|tools|benchmarks|tests|docs)/[\w./-]*[\w/])")
+    history = {"CHANGELOG.md", "benchmark-history.md"}
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "conf").rglob("*.yaml")),
+             *sorted((ROOT / "src").rglob("*.py")), *sorted((ROOT / "tools").glob("*.py"))]  # fmt: skip
+
+    def found(path: str) -> bool:
+        return "<" in path or "*" in path or "mynet" in path or (ROOT / path.rstrip(".")).exists()
+
+    missing = sorted(
+        {f"{page.relative_to(ROOT)}: {path}" for page in pages if page.name not in history for path in named.findall(page.read_text())
+         if not found(path)}
+    )  # fmt: skip
+    assert not missing, missing
