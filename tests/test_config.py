@@ -8,8 +8,9 @@ from pathlib import Path
 import pytest
 from omegaconf import MISSING, OmegaConf
 
-from offroad_path.config import Config, load_config
+from offroad_path.config import Config, load_config, validate_config
 from offroad_path.models import MODELS
+from offroad_path.utils.rules import ConfigValueError
 
 
 def leaf_fields(schema: type, prefix: str = "") -> list[tuple[str, dataclasses.Field]]:
@@ -105,3 +106,21 @@ def test_a_list_naming_a_value_twice_or_nothing_is_refused_before_any_work(overr
 
     with pytest.raises(ConfigValueError, match=says):
         validate_config(load_config(override))
+
+
+def test_each_choice_list_is_the_one_its_implementation_uses():
+    """config/ holds the names a setting may take; the module that implements them imports the list or
+    keys a table by exactly those names, so the schema's check and the code cannot drift apart."""
+    from offroad_path.config import labelling, training, world
+    from offroad_path.data import splitting
+    from offroad_path.labelling import frame_selection, labeller
+    from offroad_path.odometry.trajectory import ESTIMATORS
+    from offroad_path.steering import balance
+    from offroad_path.world.groups import GROUP_KEYS
+
+    assert tuple(ESTIMATORS) == labelling.ODOMETRY_METHODS and tuple(GROUP_KEYS) == world.GROUP_KEYS
+    assert labeller.POSE_SOURCES is labelling.POSE_SOURCES and labeller.OCCLUSION_DEPTHS is labelling.OCCLUSION_DEPTHS
+    assert frame_selection.STRATEGIES is labelling.FRAME_STRATEGIES and splitting.STRATEGIES is labelling.SPLIT_STRATEGIES
+    assert training.UNKNOWN_DEPTH == ("keep", "drop") and balance.BALANCES is training.BALANCES  # filter: "drop" zeroes
+    with pytest.raises(ConfigValueError, match=r"label\.odometry\.method=.bundle.: must be one of: frame_to_frame, windowed"):
+        validate_config(load_config("label.odometry.method=bundle"))

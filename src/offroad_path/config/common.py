@@ -3,7 +3,6 @@ from conf/ or from the registries that implement them."""
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,12 +25,6 @@ def config_names(group: str) -> Callable[[], list[str]]:
 
 
 _model_names = config_names("model")
-
-
-def registry(module: str, name: str) -> Callable[[], list[str]]:
-    """The valid names of a choice, read from the registry `module.name` that implements it when a
-    value is checked (a stage checks only the groups it reads, so it imports only its own modules)."""
-    return lambda: list(getattr(importlib.import_module(f"offroad_path.{module}"), name))
 
 
 PRETRAININGS = config_names("pretraining")

@@ -6,14 +6,22 @@ from dataclasses import dataclass, field
 
 from omegaconf import MISSING
 
-from offroad_path.config.common import IMAGE_SIZE, PITCH, registry
+from offroad_path.config.common import IMAGE_SIZE, PITCH
 from offroad_path.utils.rules import at_least, between, numbers, one_of, positive, rule, setting
+
+# The choices these schemas accept, each implemented by the module named beside it (which imports
+# its list from here; tests/test_config.py checks an implementation that keys a table by them).
+POSE_SOURCES = ("vo", "file")  # label.poses.source: labelling.labeller
+OCCLUSION_DEPTHS = ("stereo", "ground_truth")  # label.occlusion.depth: labelling.labeller
+ODOMETRY_METHODS = ("windowed", "frame_to_frame")  # label.odometry.method: odometry.trajectory.ESTIMATORS
+FRAME_STRATEGIES = ("midway", "stride")  # label.strategy: labelling.frame_selection
+SPLIT_STRATEGIES = ("grouped", "stretch", "random")  # split.strategy: data.splitting
 
 
 @dataclass
 class PosesConfig:
     # vo: stereo visual odometry; file: a KITTI-format pose file per sequence
-    source: str = setting(one_of(registry("labelling.labeller", "POSE_SOURCES")))
+    source: str = setting(one_of(POSE_SOURCES))
     # With source=file: a path pattern with {name} (the sequence folder's name), or None for
     # the sequence's own poses (poses.txt, or KITTI's poses/XX.txt).
     file: str | None = MISSING
@@ -24,7 +32,7 @@ class PosesConfig:
 class OcclusionConfig:
     enabled: bool = MISSING  # beyond the paper: no path label on ground hidden behind a crest or obstacle
     # stereo: from the f0 disparity; ground_truth: the sequence's depth/ (synthetic)
-    depth: str = setting(one_of(registry("labelling.labeller", "OCCLUSION_DEPTHS")))
+    depth: str = setting(one_of(OCCLUSION_DEPTHS))
     margin_m: float = setting(at_least(0))
     margin_rel: float = setting(at_least(0))
 
@@ -99,7 +107,7 @@ class OdometryConfig:
     """Stereo visual odometry (offroad_path.odometry): the front end's settings are shared; the
     window, fallback and depth-weighting settings are the windowed estimator's."""
 
-    method: str = setting(one_of(registry("odometry.trajectory", "ESTIMATORS")))
+    method: str = setting(one_of(ODOMETRY_METHODS))
     max_features: int = MISSING
     bucket_rows: int = MISSING
     bucket_cols: int = MISSING
@@ -134,7 +142,7 @@ class LabelConfig:
     out_dir: str = MISSING
     metrics_path: str = MISSING
     distance_m: float = setting(positive())
-    strategy: str = setting(one_of(registry("labelling.frame_selection", "STRATEGIES")))
+    strategy: str = setting(one_of(FRAME_STRATEGIES))
     stride_m: float = setting(at_least(0.05))  # denser than the frames gives no more labels; the stage also wants it <= distance_m
     min_motion_m: float = setting(at_least(0))
     poses: PosesConfig = field(default_factory=PosesConfig)
@@ -153,7 +161,7 @@ class SplitConfig:
     labels_dir: str = MISSING
     out_dir: str = MISSING
     # grouped: by blocks of driving, no leakage; stretch: each recording's last stretch; random: the paper's per-image split
-    strategy: str = setting(one_of(registry("data.splitting", "STRATEGIES")))
+    strategy: str = setting(one_of(SPLIT_STRATEGIES))
     test_fraction: float = setting(between(0, 1, low_open=True, high_open=True))
     val_fraction: float = setting(between(0, 1, high_open=True))
     block_m: float = setting(positive())

@@ -6,8 +6,11 @@ from dataclasses import dataclass
 
 from omegaconf import MISSING
 
-from offroad_path.config.common import IMAGE_SIZE, MAX_STEPS, PRETRAININGS, _model_names, registry
+from offroad_path.config.common import IMAGE_SIZE, MAX_STEPS, PRETRAININGS, _model_names
 from offroad_path.utils.rules import at_least, between, each, one_of, positive, setting
+
+UNKNOWN_DEPTH = ("keep", "drop")  # postprocess.unknown_depth: postprocessing.filter
+BALANCES = ("none", "oversample", "weighted")  # steering.balance: steering.balance
 
 
 @dataclass
@@ -108,7 +111,7 @@ class PostprocessConfig:
     delta: float = setting(between(0, 1, high_open=True))  # confidence below this is set to 0
     use_depth: bool = MISSING
     # pixels without stereo depth: keep (the paper) or zero
-    unknown_depth: str = setting(one_of(registry("postprocessing.filter", "UNKNOWN_DEPTH")))
+    unknown_depth: str = setting(one_of(UNKNOWN_DEPTH))
     blur_scale: int = setting(between(1, 8))  # the blur runs at 1/blur_scale of the resolution (1: exact)
 
 
@@ -134,7 +137,7 @@ class SteeringConfig:
     jitter: float = MISSING  # photometric augmentation (no geometric: it would change the steering)
     cache_mb: float = setting(at_least(0))  # decoded images kept in memory (0: decode each epoch)
     # the straight-ahead bias's remedy: none | oversample | weighted
-    balance: str = setting(one_of(registry("steering.balance", "BALANCES")))
+    balance: str = setting(one_of(BALANCES))
     lock_deg: float = setting(positive())  # road-wheel angle of normalised steering 1, for errors in degrees
     steering_ratio: float = setting(positive())  # steering-wheel degrees per road-wheel degree
     slip: bool = MISSING  # train on the steering the same drives take on world.slip's ground (train_steering_slip)

@@ -22,11 +22,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from offroad_path.config.labelling import SPLIT_STRATEGIES
+
 if TYPE_CHECKING:
     from offroad_path.config.labelling import SplitConfig
 
 log = logging.getLogger(__name__)
-STRATEGIES = ("grouped", "stretch", "random")
+STRATEGIES = SPLIT_STRATEGIES
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from offroad_path.config.labelling import FRAME_STRATEGIES
 from offroad_path.geometry.path import distance_along
 
-STRATEGIES = ("midway", "stride")
+STRATEGIES = FRAME_STRATEGIES
 
 
 def select_segments(

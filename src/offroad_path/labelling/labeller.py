@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from omegaconf import DictConfig
 
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.labelling import OCCLUSION_DEPTHS, POSE_SOURCES, OdometryConfig
 from offroad_path.errors import InputError
 from offroad_path.geometry.path import distance_along
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, encode_disparity, sgbm
@@ -27,9 +27,6 @@ from offroad_path.sequence.reader import Sequence, open_sequence
 from offroad_path.utils.media import write_image
 
 log = logging.getLogger(__name__)
-
-POSE_SOURCES = ("vo", "file")  # label.poses.source
-OCCLUSION_DEPTHS = ("stereo", "ground_truth")  # label.occlusion.depth
 
 
 @dataclass

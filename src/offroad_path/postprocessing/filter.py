@@ -25,8 +25,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-UNKNOWN_DEPTH = ("keep", "drop")  # postprocess.unknown_depth
-
 
 @dataclass(frozen=True)
 class PostprocessParams:

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-BALANCES = ("none", "oversample", "weighted")  # steering.balance
+from offroad_path.config.training import BALANCES
+
 BIN_WIDTH = 0.1  # of |normalised steering|: the bins of data/steering/error_by_magnitude.csv
 
 
