@@ -9,6 +9,7 @@ from math import nan
 from offroad_path.evaluation.tables import (
     EVERY_SCRATCH_VS_PRIOR,
     PP_KEY,
+    TITLES,
     baseline_name,
     baseline_row,
     comparison_title,
@@ -17,12 +18,12 @@ from offroad_path.evaluation.tables import (
     method_title,
     network_name,
     split_run_name,
+    title,
 )
 from offroad_path.evaluation.temporal import TemporalRow
 from offroad_path.statistics.bootstrap import Interval
 from offroad_path.statistics.primaries import Verdict, verdicts
-from offroad_path.statistics.scores import SCORES, TITLES
-from offroad_path.world.groups import GROUPS
+from offroad_path.statistics.scores import SCORES
 
 # Holder 2018 (thesis), Table 5.1 (accuracy, IoU): their private data, full-size networks from random weights
 # ("none") or pretrained on a semantic segmentation task ("segmentation"); post-processing as ours.
@@ -59,7 +60,7 @@ def results_table_markdown(m: dict, heading: str = "\n## Results (Table 5.1 layo
         "pretraining rows pretrained on a semantic segmentation task, as ours on the world's 8 classes, its other rows from "
         "random weights.\n",
         "| network | pretraining | post-processing | "
-        + " | ".join(f"{TITLES.get(name, name)} [95 % interval]" if name == "iou" else TITLES.get(name, name) for name in SCORES)
+        + " | ".join(f"{title(name)} [95 % interval]" if name == "iou" else title(name) for name in SCORES)
         + (" | IoU over seeds, mean ± sd" if seeds > 1 else "")
         + " | paper: accuracy | paper: IoU |",
         "|" + " --- |" * (5 + len(SCORES) + (seeds > 1)),
@@ -195,13 +196,9 @@ def baselines_markdown(m: dict, heading: str = "\n## Baselines\n\n") -> str:
     )
 
 
-BASELINE_TITLES = {"mean_path_prior": "mean path prior", "colour_classifier": "colour classifier"}
-
-
 def conditions_markdown(c: dict[str, dict], heading: str = "\n## Results by condition\n\n") -> str:
     """IoU by condition from its metrics (condition -> frames, sequences, each method's IoU, interval and
     margin over the prior), and the off-track group against the prior: results.md's and docs/results.md's."""
-    titles = {key: title for key, title, _ in GROUPS}
     methods = [k for k in next(iter(c.values())) if k not in ("frames", "sequences") and "." not in k]
     lines = [
         f"{heading}Pooled IoU (raw maps) over the test frames of each group, from what the world knows about the next 20 m "
@@ -210,13 +207,13 @@ def conditions_markdown(c: dict[str, dict], heading: str = "\n## Results by cond
         "hierarchical-bootstrap interval (the test worlds that hold the group's frames, their blocks, the seeds), and the "
         "number of test sequences they come from; a group within one or two sequences says little. Exploratory: no "
         "correction for multiplicity.\n",
-        "| condition | test images | test sequences | " + " | ".join(BASELINE_TITLES.get(m) or method_title(m) for m in methods) + " |",
+        "| condition | test images | test sequences | " + " | ".join(title(m) if m in TITLES else method_title(m) for m in methods) + " |",
         "|" + " --- |" * (3 + len(methods)),
     ]
     for key, row in c.items():
         cells = [_condition_cell(row, m) for m in methods]
-        lines.append(f"| {titles.get(key, key)} | {row['frames']} | {row.get('sequences', '')} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n" + _against_prior(c.get("off_track", {}), titles.get("off_track", "off_track"))
+        lines.append(f"| {title(key)} | {row['frames']} | {row.get('sequences', '')} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n" + _against_prior(c.get("off_track", {}), title("off_track"))
 
 
 def _condition_cell(row: dict, method: str) -> str:

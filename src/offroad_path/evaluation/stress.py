@@ -18,13 +18,12 @@ from offroad_path.data.manifest import Sample
 from offroad_path.evaluation.conditions import read_conditions
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.report import TestSet
-from offroad_path.evaluation.tables import method_title
+from offroad_path.evaluation.tables import method_title, title
 from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
 from offroad_path.statistics.bootstrap import Interval
 from offroad_path.statistics.scores import iou as iou_score
 from offroad_path.world.groups import GROUPS
 
-TITLES = {key: title for key, title, _ in GROUPS}
 TESTS = {key: test for key, _, test in GROUPS}
 
 
@@ -95,7 +94,7 @@ def markdown(found: dict, heading: str = "\n## Stress sets\n\n") -> str:
     ]
     for name, row in found.items():
         cells = [_cell(row[r]) for r in runs]
-        lines.append(f"| {TITLES[name]} | {row['worlds']} | {row['frames']} | {row['mean_path_prior']:.3f} | " + " | ".join(cells) + " |")
+        lines.append(f"| {title(name)} | {row['worlds']} | {row['frames']} | {row['mean_path_prior']:.3f} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 

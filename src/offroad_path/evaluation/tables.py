@@ -10,11 +10,26 @@ import math
 from collections.abc import Mapping
 from dataclasses import fields
 
-from offroad_path.statistics.scores import SCORES, TITLES, Record
+from offroad_path.statistics.scores import SCORES, Record
+from offroad_path.statistics.scores import TITLES as SCORE_TITLES
+from offroad_path.world.groups import GROUPS
 
 PP_KEY = {"no": "raw", "yes": "postprocessed"}  # post-processing "no"/"yes": their names in metrics.json and MLflow
-# Column titles of the registry-made tables where a column's name is not its title (a score's: TITLES).
-COLUMN_TITLES = {"postprocessing": "post-processing", "mean_image_iou": "per-image mean IoU"}
+# Every report table's titles for a metrics key, one lookup (title): the scores' (statistics.scores.TITLES,
+# where a new score registers its own), and here the columns', the baselines' and the condition groups'
+# (world.groups.GROUPS). A key without an entry is its own title; a run's comes from method_title.
+TITLES: dict[str, str] = {
+    "postprocessing": "post-processing",
+    "mean_image_iou": "per-image mean IoU",
+    "mean_path_prior": "mean path prior",
+    "colour_classifier": "colour classifier",
+    **{key: title for key, title, _ in GROUPS},
+}
+
+
+def title(key: str) -> str:
+    """The title of a metrics key in every table (a score's, else TITLES; the key itself without an entry)."""
+    return SCORE_TITLES.get(key) or TITLES.get(key, key)
 
 
 def result_row(network: str, pretraining: str, postprocessing: str, scores: Mapping[str, float], mean_image_iou: float) -> Record:
@@ -87,7 +102,7 @@ def fmt(x: float | int | str) -> str:
 def _columns(row) -> list[tuple[str, str]]:
     """(name, title) of a row's columns: a Record's keys, or a dataclass's fields (titled by their metadata)."""
     if isinstance(row, dict):
-        return [(name, TITLES.get(name) or COLUMN_TITLES.get(name, name)) for name in row]
+        return [(name, title(name)) for name in row]
     return [(f.name, f.metadata.get("title", f.name)) for f in fields(row)]
 
 

@@ -22,9 +22,9 @@ from offroad_path.errors import InputError
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.evaluation.rendering import comparisons_markdown
 from offroad_path.evaluation.report import TestSet
-from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR, PP_KEY, method_title, split_run_name
+from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR, PP_KEY, method_title, split_run_name, title
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
-from offroad_path.statistics.scores import SCORES, TITLES, Score, iou
+from offroad_path.statistics.scores import SCORES, Score, iou
 
 
 def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> list[tuple[str, int]]:
@@ -168,7 +168,7 @@ class Uncertainty:
         lines += [
             "Each IoU's interval, and with several training seeds the mean and standard deviation of the seeds' own IoU, are "
             "in the results table above; here the other scores' intervals (raw maps) and the comparisons.\n",
-            "| method (raw) | " + " | ".join(f"{TITLES.get(name, name)} [95 % interval]" for name in others) + " |",
+            "| method (raw) | " + " | ".join(f"{title(name)} [95 % interval]" for name in others) + " |",
             "|" + " --- |" * (1 + len(others)),
         ]
         lines += [f"| {method_title(run)} | " + " | ".join(self.others[run, "no"][name].text() for name in others) + " |" for run in runs]
