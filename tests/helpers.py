@@ -84,7 +84,7 @@ def git(repo: Path, *args: str) -> None:
 
 
 def dvc_command(repo: Path, *args: str) -> dict:
-    env = {**os.environ, **GIT_IDENTITY}
+    env = {**{k: v for k, v in os.environ.items() if k != "MLFLOW_TRACKING_URI"}, **GIT_IDENTITY}  # the copy's own mlflow.db
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"  # `python` in dvc.yaml is this one
     env["PYTHONPATH"] = str(repo / "src")  # the copy's code, not the installed checkout's
     return {"args": [sys.executable, "-m", "dvc", *args], "cwd": repo, "env": env, "text": True}
@@ -135,6 +135,7 @@ def tiny_repo(repo: Path) -> Path:
     # with one thread per stage, since two pipelines run at once (tests/test_pipeline_dvc.py).
     tiny = yaml.safe_load((ROOT / "conf" / "experiment" / "tour.yaml").read_text()) | {"threads": 1, "experiment_name": "tiny"}
     del tiny["evaluate"]["architectures"]  # every network of the grid, as conf/evaluate/default.yaml lists them
+    del tiny["mlflow"]  # the default experiment, which the notebooks read (their config is the checkout's)
     (repo / "conf" / "experiment" / "tiny.yaml").write_text("# @package _global_\n" + yaml.safe_dump(tiny))
     primary = repo / "conf" / "config.yaml"
     text = primary.read_text()
