@@ -105,6 +105,13 @@ def test_values_without_meaning_are_refused_naming_the_key(override):
         validate_config(load_config(override))
 
 
+@pytest.mark.parametrize("weight", ["inf", "nan", "-1"])
+def test_a_look_weight_that_is_no_weight_is_refused_naming_the_weights(weight):
+    """Once "Probabilities contain NaN" from NumPy, naming no key, after the world had started."""
+    with pytest.raises(ConfigValueError, match=r"^world\.appearance\.weights=.*weight >= 0"):
+        validate_config(load_config(f"world.appearance.weights.track.dirt={weight}"))
+
+
 @pytest.mark.parametrize("key", ["world.appearance.weights", "world.appearance.weights.track", "evaluate.conclusions.primaries"])
 def test_an_empty_mapping_that_would_change_nothing_is_refused(key):
     """An override merges into a mapping: `{}` would leave the defaults in place without a word."""
