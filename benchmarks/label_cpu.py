@@ -10,6 +10,7 @@ OPENBLAS_CORETYPE this CPU runs, OpenCV's IPP at SSE4.2 and off, OpenCV and NumP
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import os
 import subprocess
@@ -20,7 +21,13 @@ from common import openblas_cores, without_vector_kernels
 
 
 def main() -> None:
-    root, overrides = Path(sys.argv[1]), sys.argv[2:]
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("work_dir", type=Path, help="where the world and each environment's labels are written")
+    parser.add_argument("overrides", nargs="*", help="label overrides (key=value)")
+    args = parser.parse_args()
+    if bad := [o for o in args.overrides if "=" not in o]:
+        parser.error(f"overrides: {bad[0]!r} is not key=value")
+    root, overrides = args.work_dir, args.overrides
     world = root / "world"
     if not world.exists():
         subprocess.run([sys.executable, "-m", "offroad_path.synthesize", "synthesize.sequences=2", "world.frames=40", "world.width=256",

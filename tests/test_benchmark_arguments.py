@@ -27,3 +27,12 @@ def test_a_bad_argument_is_one_line_and_exit_2(script, arguments, says, tmp_path
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1 and lines[0].startswith(f"error: {says}"), run.stderr
     assert not (tmp_path / "w").exists()
+
+
+@pytest.mark.parametrize("script", ["label_cpu.py", "learning_curve.py", "seed_spread.py", "pipeline_time.py"])
+def test_help_prints_and_writes_nothing(script, tmp_path):
+    """`--help` is help: once, a benchmark took it for its work folder and ran, writing into `./--help`."""
+    run = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), "--help"], capture_output=True, text=True, cwd=tmp_path,
+                         timeout=120)  # fmt: skip
+    assert run.returncode == 0 and "usage:" in run.stdout, run.stderr[-800:]
+    assert list(tmp_path.iterdir()) == []
