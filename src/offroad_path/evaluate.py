@@ -119,8 +119,9 @@ def check_primaries(e: DictConfig) -> None:
 
 
 def refuse_unmakeable(name: str, compare: str) -> None:
-    """A primary's comparison that no grid of the registered networks and pretrainings makes (a
-    misspelt run, a reversed pair): InputError naming its key, instead of a primary not measured."""
+    """A primary's comparison that no grid of the registered networks and pretrainings makes, in
+    either order of evaluate.architectures (a misspelt run or baseline): InputError naming its key,
+    instead of a primary not measured."""
     from offroad_path.config.common import PRETRAININGS, _model_names
     from offroad_path.evaluation.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
 

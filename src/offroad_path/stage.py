@@ -88,15 +88,15 @@ def reads(*groups: str, writes: Callable[[DictConfig], Outputs] | None = None) -
             own = stage_config(cfg, groups, stage.__name__)
             if writes is None:
                 return stage(own)
-            if (paths := OmegaConf.select(cfg, "paths")) is not None:  # after the output rule's own refusals
-                check_outputs(writes(own))
-                check_metrics_follow(writes(own), paths.metrics_dir, (paths.data_dir, paths.recordings_dir))
+            outputs = writes(own)
+            check_outputs(outputs)  # the output rule's refusals first, then where the metrics go
+            if (paths := OmegaConf.select(cfg, "paths")) is not None:
+                check_metrics_follow(outputs, paths.metrics_dir, (paths.data_dir, paths.recordings_dir))
             if trains and not is_global_zero():
                 # Another rank of a distributed training run: rank 0 holds the locks and writes the
-                # outputs; this one writes nothing, but its outputs obey the same rule.
-                check_outputs(writes(own))
+                # outputs; this one writes nothing, but its outputs obey the same rule (checked above).
                 return stage(own)
-            with claimed(writes(own)):
+            with claimed(outputs):
                 return stage(own)
 
         run.reads = groups  # type: ignore[attr-defined]
