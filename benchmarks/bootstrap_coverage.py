@@ -1,13 +1,15 @@
 """Coverage of the evaluate stage's intervals when worlds, blocks and training seeds each shift a
-score: the hierarchical bootstrap (test worlds, then their blocks, then seeds) against resampling
-blocks alone, on simulated test sets whose truth is known.
+score: the hierarchical bootstrap (test worlds, then their blocks, then seeds) with and without its
+small-sample widening (statistics.bootstrap.small_sample_factor), against resampling blocks alone,
+on simulated test sets whose truth is known.
 
-    python benchmarks/bootstrap_coverage.py [--trials 200]
+    python benchmarks/bootstrap_coverage.py [--trials 200] [--worlds 7] [--seeds 2] [--level 0.95]
 
-Each trial: 8 test worlds of 3 to 7 blocks, 3 training seeds; a block's path rate is 0.6 plus its
-world's effect, its own and the seed's (normal, the standard deviations of each row); false
-positives and negatives 0.1-0.2 each. The truth: the population's pooled IoU, 0.6 / 0.9. Prints the
-share of 95 % intervals that hold it (the same construction as tests/test_bootstrap.py's).
+Each trial: `--worlds` test worlds of 3 to 7 blocks, `--seeds` training seeds; a block's path rate
+is 0.6 plus its world's effect, its own and the seed's (normal, the standard deviations of each
+row); false positives and negatives 0.1-0.2 each. The truth: the population's pooled IoU, 0.6 / 0.9.
+A seed's effect is a draw of the training's randomness, so the truth averages over it too. Prints
+the share of intervals at `--level` that hold the truth.
 """
 
 from __future__ import annotations
@@ -17,37 +19,57 @@ import time
 
 import numpy as np
 
-from offroad_path.statistics.bootstrap import Resampling, interval, score_draws
+from offroad_path.statistics.bootstrap import Draws, Resampling, interval, score_draws
 from offroad_path.statistics.scores import iou
 
 SETTINGS = [(0.06, 0.05, 0.02), (0.04, 0.05, 0.01), (0.08, 0.03, 0.03), (0.0, 0.08, 0.0)]  # world, block, seed sd
 
 
-def test_set(rng: np.random.Generator, world_sd: float, block_sd: float, seed_sd: float) -> tuple[np.ndarray, list[int]]:
-    n_blocks = rng.integers(3, 8, 8)
-    world_of = np.repeat(np.arange(8), n_blocks)
+def test_set(rng: np.random.Generator, sds: tuple[float, float, float], worlds: int, seeds: int) -> tuple[np.ndarray, list[int]]:
+    world_sd, block_sd, seed_sd = sds
+    n_blocks = rng.integers(3, 8, worlds)
+    world_of = np.repeat(np.arange(worlds), n_blocks)
     size = rng.uniform(500, 1500, len(world_of))
-    effect = rng.normal(0, world_sd, 8)[world_of] + rng.normal(0, block_sd, len(world_of))
-    tp = size * np.clip(0.6 + effect[None, :] + rng.normal(0, seed_sd, 3)[:, None], 0.05, 0.95)
+    effect = rng.normal(0, world_sd, worlds)[world_of] + rng.normal(0, block_sd, len(world_of))
+    tp = size * np.clip(0.6 + effect[None, :] + rng.normal(0, seed_sd, seeds)[:, None], 0.05, 0.95)
     fp, fn = (np.broadcast_to(size * rng.uniform(0.1, 0.2, len(world_of)), tp.shape) for _ in range(2))
     return np.stack([tp, fp, np.zeros_like(tp), fn], axis=-1), list(world_of)
 
 
+def positive_int(text: str) -> int:
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of at least 1")
+    return int(text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trials", type=int, default=200)
+    parser.add_argument("--trials", type=positive_int, default=200)
+    parser.add_argument("--worlds", type=positive_int, default=7, help="test worlds per simulated test set (at least 2)")
+    parser.add_argument("--seeds", type=positive_int, default=2, help="training seeds")
+    parser.add_argument("--level", type=float, default=0.95)
     args = parser.parse_args()
+    if args.worlds < 2:
+        parser.error("--worlds: at least 2 (a bootstrap of one world has nothing to draw)")
+    if not 0 < args.level < 1:
+        parser.error("--level: between 0 and 1")
     truth = 0.6 / 0.9
-    print("| world sd | block sd | seed sd | hierarchical coverage | blocks only | seconds |\n| --- | --- | --- | --- | --- | --- |")
+    print(f"{args.worlds} worlds x {args.seeds} seeds, {args.trials} trials, nominal {args.level:.0%}\n")
+    print("| world sd | block sd | seed sd | hierarchical, widened | hierarchical, percentile | blocks only | seconds |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
     for world_sd, block_sd, seed_sd in SETTINGS:
-        start, hierarchical, flat = time.perf_counter(), 0, 0
+        start, widened, plain, flat = time.perf_counter(), 0, 0, 0
         for trial in range(args.trials):
-            sums, worlds = test_set(np.random.default_rng(2000 + trial), world_sd, block_sd, seed_sd)
-            found = score_draws(sums, iou, Resampling(1000, seed=trial), worlds).interval()
-            hierarchical += found.low <= truth <= found.high
-            blocks_only = interval(sums.sum(axis=0), iou, Resampling(1000, seed=trial))
+            sums, worlds = test_set(np.random.default_rng(2000 + trial), (world_sd, block_sd, seed_sd), args.worlds, args.seeds)
+            draws = score_draws(sums, iou, Resampling(1000, seed=trial, level=args.level), worlds)
+            found = draws.interval()
+            widened += found.low <= truth <= found.high
+            percentile = Draws(draws.estimate, draws.values, draws.resampling).interval()  # worlds=0: no widening
+            plain += percentile.low <= truth <= percentile.high
+            blocks_only = interval(sums.sum(axis=0), iou, Resampling(1000, seed=trial, level=args.level))
             flat += blocks_only.low <= truth <= blocks_only.high
-        print(f"| {world_sd:g} | {block_sd:g} | {seed_sd:g} | {hierarchical / args.trials:.1%} | {flat / args.trials:.1%} | "
+        n = args.trials
+        print(f"| {world_sd:g} | {block_sd:g} | {seed_sd:g} | {widened / n:.1%} | {plain / n:.1%} | {flat / n:.1%} | "
               f"{time.perf_counter() - start:.1f} |")  # fmt: skip
 
 

@@ -11,10 +11,11 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
+from offroad_path.errors import InputError
 from offroad_path.evaluation.readme import main
-from offroad_path.evaluation.rendering import PRIMARIES_HEAD, misstated
+from offroad_path.evaluation.rendering import PRIMARIES_HEAD, misstated, primaries_markdown
 from offroad_path.statistics.counts import compare_rates, power, route_needed
-from offroad_path.statistics.primaries import holm_levels, verdicts
+from offroad_path.statistics.primaries import check_declared, holm_levels, verdicts
 
 
 def test_the_exact_test_on_hand_made_counts():
@@ -75,6 +76,29 @@ def test_holm_rejects_step_by_step_and_shows_each_interval_at_its_level():
     # A primary not measured counts as p = 1: the others are still corrected for a family of three.
     partial = {v.name: v for v in verdicts(declared, {"x": measured["x"]}, 0.05)}
     assert partial["x"].rejected and partial["y"].interval is None and not partial["y"].rejected
+
+
+def test_an_interval_within_the_smallest_effect_reads_no_material_difference_whatever_holm_says():
+    declared = OmegaConf.create(
+        {name: {"claim": name, "compare": f"uncertainty/{name}", "smallest_effect": 0.01} for name in ("tiny", "real", "wide", "none")}
+    )
+    declared["none"]["smallest_effect"] = None
+    measured = {
+        "tiny": _entry(-0.004, 0.0003, {4: (-0.008, -0.002)}, family=4),  # rejected, but within +-0.01: equivalent
+        "real": _entry(-0.03, 0.0003, {3: (-0.047, -0.013)}, family=4),  # rejected and beyond 0.01: a direction
+        "wide": _entry(-0.02, 0.06, {1: (-0.044, 0.001)}, family=4),  # not rejected, reaches beyond 0.01: undecided
+        "none": _entry(-0.004, 0.0004, {2: (-0.008, -0.002)}, family=4),  # no smallest effect declared: a direction
+    }
+    found = {v.name: v for v in verdicts(declared, measured, 0.05)}
+    assert found["tiny"].rejected and found["tiny"].negligible and found["tiny"].direction == ""
+    assert not found["real"].negligible and found["real"].direction == "lower"
+    assert not found["wide"].rejected and not found["wide"].negligible and found["wide"].direction == ""
+    assert not found["none"].negligible and found["none"].direction == "lower"
+    rows = primaries_markdown(OmegaConf.create({"alpha": 0.05, "primaries": declared}), measured)
+    assert "| no material difference (within ±0.01) |" in rows and "| real's IoU lower |" in rows and "| no difference measured |" in rows
+    for bad in (0, -0.01, float("nan"), "a lot"):
+        with pytest.raises(InputError, match=r"evaluate.conclusions.primaries.x.smallest_effect"):
+            check_declared({"x": {"claim": "x", "compare": "uncertainty/a_vs_b", "smallest_effect": bad}}, {})
 
 
 def test_a_readme_stating_a_direction_inside_its_corrected_interval_fails_the_check(tmp_path, capsys):

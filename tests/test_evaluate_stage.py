@@ -32,7 +32,9 @@ def scored(compose_config, split_dir, tmp_path):
     for run, maps in made.items():
         write_run(compose_config, split_dir, tmp_path, run, 0, maps)
     write_pilotnet_predictions(samples, tmp_path / "steering" / "predictions.csv")
-    rows = evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]"))
+    # the open loop joins the family as the GPU and full presets add it (conf/evaluate/primaries/open_loop.yaml)
+    open_loop = "+evaluate/primaries@evaluate.conclusions.primaries=open_loop"
+    rows = evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]", open_loop))
     return rows, labels.astype(bool), made
 
 

@@ -52,6 +52,25 @@ def check_closed_loop(repo: Path, steering: dict) -> None:
     assert not drove.get("primaries")
 
 
+def check_no_held_out_world_trains(repo: Path, worlds: list[dict]) -> None:
+    """No frame of a held-out world (main test, development, stress) in any network's training or
+    validation frames: the path split's (which pretraining and training read) and every PilotNet's,
+    as the train_steering stages wrote them beside their checkpoints. A held-out world's frames do
+    reach the test parts (so the check reads the right names)."""
+    held_out = {w["name"] for w in worlds}
+    tested = {s.sequence for s in read_manifest(repo / "data" / "split" / "test.csv")}
+    assert tested and tested <= held_out
+    folders = [repo / "data" / "split"] + [
+        repo / "data" / pilotnet / "seed0" for pilotnet in ("steering", "steering_slip", "steering_curvature")
+    ]
+    for folder in folders:
+        for part in ("train", "val"):
+            trained = {s.sequence for s in read_manifest(folder / f"{part}.csv")}
+            assert trained and not trained & held_out, (folder, part, trained & held_out)
+    steered = {s.sequence for s in read_manifest(repo / "data" / "steering" / "seed0" / "test.csv")}
+    assert steered <= tested and steered
+
+
 def check_stress_set(metrics: dict, runs: set[str], worlds: list[dict]) -> None:
     """The tiny preset's stress world (a held-out look): scored on its own, every run against the prior; the main
     figures (by condition's "all" among them) hold the main test worlds only."""
@@ -104,6 +123,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     assert set(metrics["steering_from_paths"]) == runs | paired | {"straight_ahead", "pilotnet", "label_ceiling"}
     # The stress world (a held-out look): scored on its own, every run against the prior; the main figures leave it out.
     check_stress_set(metrics, runs, worlds)
+    check_no_held_out_world_trains(repo_copy, worlds)
     scored = runs | {"mean_path_prior", "colour_classifier"}
     against_prior = {
         f"{r}.minus_prior" for r in runs | {"colour_classifier"}

@@ -63,14 +63,18 @@ def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
     evaluation = {"steering_from_paths": {"straight_ahead": {"mae": 0.21}, "pilotnet": row, "label_ceiling": {"mae": 0.07}}}
     seeds = [{"seed": s, "mean_absolute_error": e, "straight_ahead_mean_absolute_error": 0.213, "test_frames": 10,
               "largest_predicted_magnitude": m, "largest_true_magnitude": 0.47, "straight_ahead_margin": 0.213 - e,
-              "straight_ahead_margin_interval": [0.213 - e - 0.02, 0.213 - e + 0.02], "collapsed": c}
-             for s, e, m, c in ((0, 0.094, 0.45, False), (1, 0.097, 0.40, False), (2, 0.213, 0.01, True))]  # fmt: skip
+              "straight_ahead_margin_interval": [0.213 - e - 0.02, 0.213 - e + 0.02], "beats_straight_ahead": 0.213 - e > 0.02,
+              "prediction_spread_ratio": r, "correlation_with_truth": c, "collapsed": r < 0.25}
+             for s, e, m, r, c in ((0, 0.094, 0.45, 0.8, 0.7), (1, 0.097, 0.40, 0.6, 0.6), (2, 0.213, 0.01, 0.01, 0.05))]  # fmt: skip
     text = _steering(evaluation, seeds)[0]
     assert "over its 3 training seeds 0.135 ± 0.068, mean ± sd" in text  # mean 0.1347, sd 0.0679 by hand
     check = pilotnet_check(seeds)
-    assert "seed 2 0.213 (straight ahead 0.213; margin +0.000 [-0.020, +0.020], largest output 0.01 of 0.47)" in check
-    assert "Seed 2 predicts a near-constant (1 of 3)" in check
-    assert "No seed collapsed" in pilotnet_check(seeds[:2]) and "near-constant" not in pilotnet_check(seeds[:2])
+    assert "seed 2 0.213 (straight ahead 0.213; margin +0.000 [-0.020, +0.020]; spread 0.01 of the truth's, correlation 0.05)" in check
+    assert "Seed 2 collapsed (1 of 3" in check and "seed 2 does not steer closer to the true angle than straight ahead" in check
+    assert "No seed collapsed; every seed steers closer" in pilotnet_check(seeds[:2]) and "collapsed (" not in pilotnet_check(seeds[:2])
+    # one of the drive's PilotNets: named, with the same check
+    slip = pilotnet_check(seeds[2:], "PilotNet trained on slip")
+    assert slip.startswith("PilotNet trained on slip, the same check: seed 2 0.213") and "Seed 2 collapsed (1 of 1" in slip
 
 
 HISTORY_PAGES = {"docs/benchmark-history.md"}  # history lives here and in CHANGELOG.md

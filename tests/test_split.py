@@ -131,3 +131,13 @@ def test_split_stage_takes_a_held_out_recording_as_test_and_refuses_another_spli
     (world / "meta.json").write_text(json.dumps(meta | {"split": "train"}))
     with pytest.raises(ValueError, match=r"world/meta\.json: \"split\" is 'train'; the only value it may take is \"test\""):
         split(compose_config(*overrides))
+
+
+def test_no_frame_of_a_held_out_world_may_train_or_validate_any_network():
+    from offroad_path.data.splitting import refuse_held_out_training
+
+    refuse_held_out_training({"train": ["drive_000"], "val": ["drive_001"], "test": ["test_000"]}, {"test_000"}, "split")
+    with pytest.raises(
+        ValueError, match=r"PilotNet's split: frames of held-out worlds would train a network \(train: test_000; val: dev_000\)"
+    ):
+        refuse_held_out_training({"train": ["drive_000", "test_000"], "val": ["dev_000"]}, {"test_000", "dev_000"}, "PilotNet's split")

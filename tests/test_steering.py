@@ -119,17 +119,25 @@ def test_stage_fast_dev_run_writes_its_outputs(compose_config, labelled_drive, s
         assert (tmp_path / "steering" / name).is_file()
 
 
-def test_a_constant_pilotnet_is_flagged_as_collapsed_and_a_steering_one_is_not():
+def test_the_collapse_check_flags_a_constant_and_a_zero_pilotnet_and_passes_an_under_steering_one():
     from offroad_path.steering.evaluation import collapse_check
 
     rng = np.random.default_rng(0)
     worlds = [f"w{i // 50}" for i in range(400)]  # 8 worlds of 50 frames
     true = np.clip(rng.normal(0, 0.25, 400), -1, 1)
-    constant = collapse_check(true, np.full(400, 0.02), worlds)
-    assert constant["collapsed"] and len(constant["collapse_reasons"]) == 2
+    for output in (np.full(400, 0.02), np.zeros(400)):  # a constant, and straight ahead itself
+        constant = collapse_check(true, output, worlds)
+        assert constant["collapsed"] and len(constant["collapse_reasons"]) == 2 and not constant["beats_straight_ahead"]
+        assert constant["prediction_spread_ratio"] == 0 and constant["correlation_with_truth"] == 0
     steering = collapse_check(true, true + rng.normal(0, 0.03, 400), worlds)
     low, high = steering["straight_ahead_margin_interval"]
-    assert not steering["collapsed"] and 0 < low < steering["straight_ahead_margin"] < high
-    # the right range but no better than straight ahead (noise as large as the angles): collapsed on the error alone
+    assert not steering["collapsed"] and steering["beats_straight_ahead"] and 0 < low < steering["straight_ahead_margin"] < high
+    # under-steering (the committed slip PilotNet's kind): 0.4 of the angle, largest output far below the
+    # truth's, yet it moves with the truth and beats straight ahead: weak, not collapsed
+    under = collapse_check(true, 0.4 * true + rng.normal(0, 0.03, 400), worlds)
+    assert np.abs(0.4 * true).max() < 0.5 * np.abs(true).max()
+    assert not under["collapsed"] and under["beats_straight_ahead"] and under["prediction_spread_ratio"] == pytest.approx(0.4, abs=0.05)
+    # noise as large as the angles: moves, but not with the truth: collapsed on the correlation, and no better than straight ahead
     noisy = collapse_check(true, rng.normal(0, 0.4, 400), worlds)
-    assert noisy["collapsed"] and noisy["collapse_reasons"] == ["error not below straight ahead's (95 % interval of the margin reaches 0)"]
+    assert noisy["collapsed"] and noisy["collapse_reasons"] == ["correlation with the truth at or below 0.1"]
+    assert not noisy["beats_straight_ahead"]

@@ -43,6 +43,9 @@ class PrimaryConfig:
     compare: str = MISSING
     # drive only: the planning rates (interventions per km, a then b) its power is computed from
     planning_per_km: list[float] | None = None
+    # the smallest difference that matters, in the estimate's units: an interval within it of no
+    # difference reads "no material difference" (statistics.primaries); None: none declared
+    smallest_effect: float | None = None
 
 
 @dataclass

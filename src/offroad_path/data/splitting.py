@@ -17,6 +17,7 @@ with the same guard.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -38,6 +39,20 @@ class Frame:
     travelled_m: float  # position along the sequence's driven path at f0
     held_out: bool = False  # from a held-out test world
     development: bool = False  # from a development world (held out too): its own manifest, development.csv
+
+
+TRAINING_PARTS = ("train", "val")  # what a network learns from or is selected on
+
+
+def refuse_held_out_training(parts: Mapping[str, Iterable[str]], held_out: Iterable[str], where: str) -> None:
+    """The rule every task's split obeys (the path split and PilotNet's): no frame of a held-out world
+    (main test, development, stress) in a training or validation part. parts: part -> the sequence
+    of each of its frames; held_out: the held-out worlds' sequences. ValueError naming them otherwise."""
+    held = set(held_out)
+    leaked = {part: sorted(held.intersection(parts.get(part, ()))) for part in TRAINING_PARTS}
+    if any(leaked.values()):
+        shown = "; ".join(f"{part}: {', '.join(names)}" for part, names in leaked.items() if names)
+        raise ValueError(f"{where}: frames of held-out worlds would train a network ({shown})")
 
 
 def block_of(sequence: str, travelled_m: float, block_m: float) -> tuple[str, int]:
@@ -74,6 +89,9 @@ def split_frames(frames: list[Frame], c: SplitConfig) -> tuple[dict[str, list[Fr
     split["development"] = development
     for name in split:
         split[name].sort(key=lambda f: (f.sequence, f.f0))
+    refuse_held_out_training(
+        {p: (f.sequence for f in split[p]) for p in TRAINING_PARTS}, (f.sequence for f in worlds + development), "split"
+    )
     return split, guarded
 
 

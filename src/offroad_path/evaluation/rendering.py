@@ -118,7 +118,8 @@ def primaries_markdown(conclusions, measured: dict[str, dict]) -> str:
         f"Primary questions, declared in `conf/evaluate/default.yaml` before the run: {len(found)} in one family, Holm's "
         f"correction at family-wise {conclusions.alpha:g} (evaluate's by the hierarchical bootstrap's p-value, the drive's "
         "by the exact test of their interventions); each interval is at the level Holm's step gives it, and a verdict states a "
-        "direction only when Holm rejects no difference. Every other comparison below is exploratory.\n",
+        "direction only when Holm rejects no difference and the interval reaches beyond the primary's smallest effect of interest "
+        "(`smallest_effect`); an interval within it reads no material difference. Every other comparison below is exploratory.\n",
         PRIMARIES_HEAD,
         "| --- | --- | --- | --- | --- | --- |",
     ]
@@ -141,7 +142,10 @@ def _primary_row(v: Verdict, entry: dict) -> str:
     else:
         shown = f"{i.estimate:+.3f} [{i.low:+.3f}, {i.high:+.3f}]"
     quantity = QUANTITY.get(section, "interventions per km")
-    verdict = f"{a}'s {quantity} {v.direction}" if v.direction else "no difference measured"
+    if v.negligible:
+        verdict = f"no material difference (within ±{v.smallest_effect:g})"
+    else:
+        verdict = f"{a}'s {quantity} {v.direction}" if v.direction else "no difference measured"
     p = f"{v.p_value:.4f}" if v.p_value >= 1e-4 else "< 0.0001"
     return f"| {v.name} | {v.claim} | {a} vs {b} | {shown} at {100 * v.level:.2f} % | {p} | {verdict} |"
 
@@ -158,7 +162,7 @@ def misstated(readme: str) -> list[str]:
             continue
         low, high = (float(x) for x in cells[3].split("[", 1)[1].split("]", 1)[0].split(","))
         null = 1.0 if cells[3].startswith("ratio") else 0.0
-        if low < null < high and cells[5] != "no difference measured":  # a bound shown as the null is rounding
+        if low < null < high and not cells[5].startswith("no "):  # a bound shown as the null is rounding
             wrong.append(cells[0])
     return wrong
 

@@ -21,6 +21,7 @@ from offroad_path.evaluation.rendering import (
 )
 from offroad_path.evaluation.tables import EVERY_SCRATCH_VS_PRIOR
 from offroad_path.statistics.counts import power_sentence
+from offroad_path.steering.evaluation import COLLAPSE_CORRELATION, COLLAPSE_SPREAD
 
 
 def results_markdown(  # noqa: PLR0913
@@ -33,6 +34,7 @@ def results_markdown(  # noqa: PLR0913
     conclusions=None,
     full: bool = True,
     temporal_alpha: float = 0.5,
+    variants: dict[str, list[dict]] | None = None,
 ) -> str:
     """The results' body (between the markers) from the metrics files (steering: PilotNet's metrics per
     training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
@@ -62,8 +64,11 @@ def results_markdown(  # noqa: PLR0913
         f"copies) from {everything.get('sequences', 'n/a')} held-out test sequences, {blocks} blocks of 20 m of driving; "
         f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % hierarchical bootstrap ({resamples} "
         f"resamples): the {worlds} test worlds drawn with replacement, then the blocks within each drawn world, then the "
-        "training seeds, every compared method on the same draw; they cover which test worlds and stretches of driving were "
-        "tested and which seeds trained the networks, with each method's counts pooled over its seeds.\n",
+        "training seeds, every compared method on the same draw, each method's counts pooled over its seeds; each interval "
+        f"widened by Student's t for {worlds} worlds (docs/conclusions.md). They cover which test worlds and stretches of "
+        "driving were tested; which seeds trained the networks only in part, since a few seeds show little of the seed-to-seed "
+        "spread, and a rerun on another kind of CPU trains other bytes: a primary's smallest effect of interest lies above "
+        "how far a rerun moved it.\n",
     ]
     out += [
         results_table_markdown(evaluation, heading=""),
@@ -73,6 +78,9 @@ def results_markdown(  # noqa: PLR0913
         out += [baselines_markdown(evaluation, heading=""), ""]
     if check := pilotnet_check(steering):
         out.append(check)
+    for folder, seeds in (variants or {}).items():
+        if check := pilotnet_check(seeds, VARIANT_TITLES.get(folder, folder)):
+            out.append(check)
     out.append(stress.markdown(evaluation.get("stress_sets", {}), heading="Stress sets (exploratory). "))
     if full:
         if table := comparisons_markdown(u, skip=(EVERY_SCRATCH_VS_PRIOR,)):  # the central claim: a primary, above
@@ -102,10 +110,17 @@ def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
         f"their training seeds): always straight ahead {s['straight_ahead']['mae']:.3f}, PilotNet {s['pilotnet']['mae']:.3f} "
         f"(on its own test set of {first.get('test_frames', 'n/a')} frames: {own}), the ground-truth label through pure pursuit "
         f"{s['label_ceiling']['mae']:.3f}. Each path network through pure pursuit, and its paired difference from "
-        "PilotNet (below 0: closer to the true angle than PilotNet; exploratory, but U-Net's is the open-loop primary):\n",
+        "PilotNet (below 0: closer to the true angle than PilotNet; exploratory unless `open_loop` is among the primaries above):\n",
         against_pilotnet_markdown(s),
     ]
     return lines
+
+
+# The drive's other PilotNets (train_steering's metrics folders, config.steering_folder), by what they drive in.
+VARIANT_TITLES = {
+    "steering_slip": "PilotNet trained on slippery ground's steering (the closed loop's traction argument)",
+    "steering_curvature": "PilotNet trained on the path's curvature (the closed loop's other-vehicle argument)",
+}
 
 
 def collapsed_seeds(steering: list[dict]) -> list[int]:
@@ -113,32 +128,46 @@ def collapsed_seeds(steering: list[dict]) -> list[int]:
     return [seed.get("seed", k) for k, seed in enumerate(steering) if seed.get("collapsed")]
 
 
-def pilotnet_check(steering: list[dict]) -> str:
-    """One sentence on every PilotNet seed against straight ahead (the stage's collapse check): what
-    the open-loop comparison's PilotNet is."""
+def pilotnet_check(steering: list[dict], name: str = "") -> str:
+    """One sentence on every seed of one PilotNet (the stage's collapse check, steering.evaluation):
+    its error against straight ahead's, the spread and correlation of its predictions, and the flags;
+    name: one of the drive's other PilotNets (VARIANT_TITLES), else the open-loop one with the check's rule."""
     if not steering:
         return ""
     rows = []
     for k, seed in enumerate(steering):
         low, high = seed.get("straight_ahead_margin_interval", (float("nan"), float("nan")))
         straight = seed["straight_ahead_mean_absolute_error"]
+        spread = seed.get("prediction_spread_ratio")
+        agreement = f"; spread {spread:.2f} of the truth's, correlation {seed['correlation_with_truth']:.2f}" if spread is not None else ""
         rows.append(
             f"seed {seed.get('seed', k)} {seed['mean_absolute_error']:.3f} (straight ahead {straight:.3f}; "
-            f"margin {seed.get('straight_ahead_margin', float('nan')):+.3f} [{low:+.3f}, {high:+.3f}], largest output "
-            f"{seed['largest_predicted_magnitude']:.2f} of {seed['largest_true_magnitude']:.2f})"
+            f"margin {seed.get('straight_ahead_margin', float('nan')):+.3f} [{low:+.3f}, {high:+.3f}]{agreement})"
         )
     bad = collapsed_seeds(steering)
+    weak = [
+        seed.get("seed", k)
+        for k, seed in enumerate(steering)
+        if not seed.get("beats_straight_ahead", seed["straight_ahead_margin_interval"][0] > 0)
+    ]
     verdict = (
-        f"seed {', '.join(map(str, bad))} predicts a near-constant ({len(bad)} of {len(steering)}): the open-loop comparison's "
-        "PilotNet includes a collapsed network, and what it says of end-to-end steering is that weak"
+        f"seed {', '.join(map(str, bad))} collapsed ({len(bad)} of {len(steering)}: its output hardly moves, or not with the truth), "
+        "so what this PilotNet says of end-to-end steering is that weak"
         if bad
-        else "no seed collapsed: each steers closer to the true angle than straight ahead, its 95 % interval (test worlds "
-        "resampled) above 0"
+        else "no seed collapsed"
     )
-    return (
-        "PilotNet, the end-to-end baseline, on its test frames (mean absolute error of the normalised angle per training seed; "
-        f"the collapse check of the train_steering stage): {'; '.join(rows)}. {verdict[0].upper()}{verdict[1:]}.\n"
+    verdict += (
+        f"; seed {', '.join(map(str, weak))} does not steer closer to the true angle than straight ahead (the margin's interval reaches 0)"
+        if weak
+        else "; every seed steers closer to the true angle than straight ahead, the margin's 95 % interval (test worlds resampled) above 0"
     )
+    head = (
+        f"{name}, the same check" if name
+        else "PilotNet, the end-to-end baseline, on its test frames (mean absolute error of the normalised angle per training seed; "
+        f"the train_steering stage's collapse check: collapsed when its predictions' spread is below {COLLAPSE_SPREAD:g} of the "
+        f"truth's or their correlation with the truth at or below {COLLAPSE_CORRELATION:g})"
+    )  # fmt: skip
+    return f"{head}: {'; '.join(rows)}. {verdict[0].upper()}{verdict[1:]}.\n"
 
 
 def _driving(drive: dict, conclusions=None) -> list[str]:

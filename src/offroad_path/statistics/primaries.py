@@ -11,6 +11,12 @@ test on interventions (statistics.counts). `verdicts` then orders the family's p
 primary its Holm level: 1 - alpha / (m - k) for the k-th smallest p (from 0) while every smaller
 one is rejected, and from the first that is not, the level that one failed at; so a primary's
 shown interval excludes the null exactly when Holm rejects it (up to the bootstrap's ties).
+
+A primary may declare its smallest effect of interest (`smallest_effect`, in its estimate's units):
+when its interval at the Holm level lies within that distance of the null, the verdict is "no
+material difference" (an equivalence test: two one-sided tests at the same level), whether or not
+Holm rejects the null, so that an effect smaller than what a rerun on another CPU or with other
+seeds moves is never stated as a direction.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ def recorded(estimate: float, p_value: float, intervals: Levels, null: float = 0
 
 def from_draws(draws: Draws, alpha: float, family: int) -> dict:
     """A bootstrap-answered primary's entry: its percentile interval at every Holm level."""
-    intervals = [[round(v, 6) for v in draws.resampling.percentiles(draws.values, level)] for level in holm_levels(alpha, family)]
+    intervals = [[round(v, 6) for v in (i.low, i.high)] for i in (draws.interval(level) for level in holm_levels(alpha, family))]
     return recorded(draws.estimate, draws.p_value(), intervals)
 
 
@@ -50,11 +56,20 @@ class Verdict:
     p_value: float
     null: float
     rejected: bool  # Holm rejects "no difference"
+    smallest_effect: float | None = None  # in the estimate's units; None: none declared
+
+    @property
+    def negligible(self) -> bool:
+        """The interval lies within smallest_effect of the null: no material difference."""
+        if self.smallest_effect is None or self.interval is None:
+            return False
+        return self.null - self.smallest_effect < self.interval.low and self.interval.high < self.null + self.smallest_effect
 
     @property
     def direction(self) -> str:
-        """'higher' / 'lower' (a above or below b) when rejected and the interval excludes the null, else ''."""
-        if not self.rejected or self.interval is None:
+        """'higher' / 'lower' (a above or below b) when rejected, the interval excludes the null and the
+        difference is not negligible, else ''."""
+        if not self.rejected or self.interval is None or self.negligible:
             return ""
         if self.interval.low > self.null:
             return "higher"
@@ -80,8 +95,10 @@ def verdicts(declared: Mapping, measured: Mapping[str, dict], alpha: float) -> l
             low, high = entry["intervals"][family - step - 1]
             interval = Interval(float(entry["estimate"]), float(low), float(high))
         q = declared[name]
+        smallest = q.get("smallest_effect")
         out[name] = Verdict(name, q["claim"], q["compare"], interval, 1.0 - alpha / (family - step), p[name],
-                            float(entry["null"]) if entry else 0.0, rejected)  # fmt: skip
+                            float(entry["null"]) if entry else 0.0, rejected,
+                            None if smallest is None else float(smallest))  # fmt: skip
     return [out[name] for name in declared]
 
 
@@ -105,6 +122,11 @@ def check_declared(declared: Mapping, available: Mapping[str, set[str]], where: 
     comparison keys this run makes) but does not make, which its report gives as not measured."""
     missing = []
     for name, q in declared.items():
+        smallest = q.get("smallest_effect")
+        if smallest is not None and not (
+            isinstance(smallest, int | float) and not isinstance(smallest, bool) and 0 < smallest < float("inf")
+        ):
+            raise InputError(f"{where}.{name}.smallest_effect", f"{smallest!r} must be a number > 0 (in the estimate's units) or null")
         section, _, key = str(q["compare"]).partition("/")
         if section not in SECTIONS or "_vs_" not in key:
             raise InputError(

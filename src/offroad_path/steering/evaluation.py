@@ -28,27 +28,39 @@ def steering_metrics(true: np.ndarray, predicted: np.ndarray, lock_deg: float, s
     }
 
 
-COLLAPSE_RANGE = 0.5  # a largest predicted magnitude below this fraction of the true one: a near-constant output
+# A PilotNet has collapsed when its output hardly moves or does not move with the truth: the spread of
+# its predictions below COLLAPSE_SPREAD of the truth's, or their correlation with the truth at or below
+# COLLAPSE_CORRELATION. One that moves with the truth but too little (under-steering) has not: whether
+# it beats straight ahead is a separate finding, from the margin's interval.
+COLLAPSE_SPREAD = 0.25
+COLLAPSE_CORRELATION = 0.1
 
 
 def collapse_check(true: np.ndarray, predicted: np.ndarray, worlds: list[str], resamples: int = 2000, seed: int = 0) -> dict:
-    """Whether a PilotNet predicts a near-constant: its largest magnitude below COLLAPSE_RANGE of the
-    true one, or its mean absolute error not below straight ahead's with a 95 % paired interval
-    (the test worlds drawn with replacement, each world's frames with it). The margin is straight
-    ahead's error minus the network's: above 0 where the network steers better."""
+    """Whether a PilotNet predicts a near-constant (collapsed: by the spread and the correlation of its
+    predictions against the truth's, not by one extreme value) and whether it steers closer to the true
+    angle than straight ahead (beats_straight_ahead: the margin's 95 % paired interval above 0, the test
+    worlds drawn with replacement, each world's frames with it). The margin is straight ahead's error
+    minus the network's: above 0 where the network steers better."""
     margin = np.abs(true) - np.abs(predicted - true)  # per frame: straight ahead's error minus the network's
     names, world_of = np.unique(np.asarray(worlds), return_inverse=True)
     sums, counts = np.bincount(world_of, margin, len(names)), np.bincount(world_of, minlength=len(names))
     drawn = np.random.default_rng(seed).integers(0, len(names), (resamples, len(names)))
     means = sums[drawn].sum(axis=1) / counts[drawn].sum(axis=1)
     low, high = (float(v) for v in np.quantile(means, [0.025, 0.975]))
-    narrow = np.abs(predicted).max() < COLLAPSE_RANGE * np.abs(true).max()
-    reasons = (["largest predicted magnitude below half the true one"] if narrow else []) + (
-        ["error not below straight ahead's (95 % interval of the margin reaches 0)"] if low <= 0 else []
+    true_sd, predicted_sd = (float(np.std(v)) if np.ptp(v) > 0 else 0.0 for v in (true, predicted))  # a constant: exactly 0
+    spread = predicted_sd / true_sd if true_sd > 0 else float("nan")
+    # a constant output has no correlation with anything: 0, not NaN
+    correlation = float(np.corrcoef(true, predicted)[0, 1]) if predicted_sd > 0 and true_sd > 0 else 0.0
+    reasons = ([f"predictions' spread below {COLLAPSE_SPREAD:g} of the truth's"] if not spread >= COLLAPSE_SPREAD else []) + (
+        [f"correlation with the truth at or below {COLLAPSE_CORRELATION:g}"] if correlation <= COLLAPSE_CORRELATION else []
     )
     return {
         "straight_ahead_margin": float(margin.mean()),
         "straight_ahead_margin_interval": [low, high],
+        "beats_straight_ahead": low > 0,
+        "prediction_spread_ratio": spread,
+        "correlation_with_truth": correlation,
         "collapsed": bool(reasons),
         "collapse_reasons": reasons,
     }

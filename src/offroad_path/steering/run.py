@@ -19,7 +19,7 @@ from offroad_path.data.labels import read_label_run
 from offroad_path.sequence import meta
 from offroad_path.steering.dataset import SteeringDataModule
 from offroad_path.steering.evaluation import collapse_check, error_by_magnitude, scatter_plot, steering_metrics
-from offroad_path.steering.frames import PARTS, steering_split
+from offroad_path.steering.frames import PARTS, steering_split, write_frames
 from offroad_path.steering.task import SteeringTask
 from offroad_path.training.run import MANIFEST_CONTEXTS, RunSpec, fit, run_identity, training_logger
 from offroad_path.utils.atomic import write_text_atomic
@@ -76,6 +76,7 @@ def fit_steering(cfg: DictConfig) -> dict:
     def write_predictions(task: SteeringTask, data: SteeringDataModule, tmp: Path) -> dict:
         true, predicted = predict(task, data.test_dataloader())
         scored.update(true=true, predicted=predicted)
+        write_frames(tmp, parts)  # train.csv, val.csv, test.csv: what this PilotNet saw
         bins = error_by_magnitude(true, predicted)
         with open(tmp / "predictions.csv", "w", newline="") as f:
             writer = csv.writer(f)
