@@ -1,8 +1,8 @@
 """`dvc repro` stage by stage: seconds from each stage's start to the next one's (DVC's hashing and
 caching of a stage's outputs count in that stage), idle or beside another CPU-heavy process.
 
-    python benchmarks/pipeline_time.py [--beside-load] [--log OUT] [-- <dvc repro arguments>]
-    python benchmarks/pipeline_time.py --parse LOG [--mlflow-db mlflow.db]
+    python benchmarks/pipeline_time.py [--beside-load] [--log OUT] [--json metrics/pipeline_time.json] [-- <dvc repro arguments>]
+    python benchmarks/pipeline_time.py --parse LOG [--mlflow-db mlflow.db] [--json metrics/pipeline_time.json]
 
 Run in a checkout (a fresh clone for "from nothing": no data/, no .dvc/cache). Every line of
 `dvc repro`'s output is stamped with the epoch second it came (written to --log), and the table
@@ -12,7 +12,9 @@ job would. `--parse` prints the table of a log written before. With the run's ML
 (`--mlflow-db`, the default mlflow.db when it exists), each stage that logs a run is split into its
 start-up (the process's imports, Hydra, data set-up and MLflow's store, until its run starts), the
 run itself, and its end (the run's end to the next stage's start: process exit, DVC hashing and
-caching its outputs). Each stage's peak resident memory is the largest high-water mark (VmHWM) of any
+caching its outputs). `--json` writes the machine, `total_s` and each stage's seconds, which the
+generated results (offroad_path.evaluation.readme) state as the committed run's time. Each
+stage's peak resident memory is the largest high-water mark (VmHWM) of any
 process under `dvc repro` while the stage runs, read from /proc every 0.2 s (a rise in a process's
 last 0.2 s can be missed); it is written into the log as `#peak` lines.
 """
@@ -20,7 +22,11 @@ last 0.2 s can be missed); it is written into the log as `#peak` lines.
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import platform
 import re
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -93,6 +99,28 @@ def overheads(lines: list[tuple[float, str]], db: Path) -> str:
     return "\n".join(rows)
 
 
+def machine() -> str:
+    """The CPU's model and core count, and the GPUs' names where nvidia-smi lists any."""
+    model = platform.processor() or platform.machine()
+    if Path("/proc/cpuinfo").is_file():
+        names = [line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines() if line.startswith("model name")]
+        model = names[0] if names else model
+    found = f"{os.cpu_count()}-core {model}"
+    if shutil.which("nvidia-smi"):
+        gpus = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True, text=True, check=False)
+        if gpus.returncode == 0 and gpus.stdout.strip():
+            found += ", " + " + ".join(gpus.stdout.split("\n")[:-1])
+    return found
+
+
+def write_json(path: Path, lines: list[tuple[float, str]]) -> None:
+    """`{"machine", "total_s", "stages": {stage: seconds}}` of one repro, for the generated results."""
+    timed = {"machine": machine(), "total_s": round(lines[-1][0] - lines[0][0], 1)}
+    timed["stages"] = {name: round(seconds, 1) for name, seconds in stage_seconds(lines)}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(timed, indent=2) + "\n")
+
+
 def read_log(path: Path) -> list[tuple[float, str]]:
     lines = []
     for line in path.read_text().splitlines():
@@ -107,10 +135,13 @@ def main() -> None:
     parser.add_argument("--log", type=Path, default=Path("pipeline_time.log"))
     parser.add_argument("--parse", type=Path, help="only print the table of an earlier --log")
     parser.add_argument("--mlflow-db", type=Path, default=Path("mlflow.db"), help="the run's MLflow store, for start-up and end times")
+    parser.add_argument("--json", type=Path, help="also write the machine, total_s and each stage's seconds here")
     parser.add_argument("dvc_args", nargs="*", help="arguments of dvc repro, after --")
     args = parser.parse_args()
     if args.parse:
         lines = read_log(args.parse)
+        if args.json:
+            write_json(args.json, lines)
         print(table(lines))
         if args.mlflow_db.is_file():
             print("\n" + overheads(lines, args.mlflow_db))
@@ -140,6 +171,8 @@ def main() -> None:
             busy.kill()
     if dvc.returncode:
         sys.exit(f"dvc repro failed ({dvc.returncode}); its output: {args.log}")
+    if args.json:
+        write_json(args.json, lines)
     print(table(lines))
     if args.mlflow_db.is_file():
         print("\n" + overheads(lines, args.mlflow_db))

@@ -1,5 +1,5 @@
 """The README's results summary and docs/results.md, generated from the committed run's metrics
-(metrics/evaluation.json, label.json, steering/seed<k>.json, drive.json), so that no number in them is
+(metrics/evaluation.json, label.json, steering*/seed<k>.json, drive.json, pipeline_time.json), so that no number in them is
 copied by hand or quotes an older run.
 
     python -m offroad_path.evaluation.readme            # rewrite the blocks between the markers
@@ -55,6 +55,7 @@ def generated(metrics_dir: Path, full: bool = False) -> str:
         full=full,
         temporal_alpha=e.temporal.alpha,
         variants=variants,
+        timing=json.loads(timed.read_text()) if (timed := metrics_dir / "pipeline_time.json").is_file() else None,
     )
 
 

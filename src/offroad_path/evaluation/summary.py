@@ -35,6 +35,7 @@ def results_markdown(  # noqa: PLR0913
     full: bool = True,
     temporal_alpha: float = 0.5,
     variants: dict[str, list[dict]] | None = None,
+    timing: dict | None = None,
 ) -> str:
     """The results' body (between the markers) from the metrics files (steering: PilotNet's metrics per
     training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
@@ -51,6 +52,7 @@ def results_markdown(  # noqa: PLR0913
         + "). Generated from `metrics/` (`python -m offroad_path.evaluation.readme`; a test fails when it disagrees with them). "
         "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
         "the stress sets, each scored on its own.\n",
+        *([_timing_sentence(timing)] if full and timing else []),
         f"Labels: {label['labels']} from {label['sequences']} rendered sequences, {label['segments_dropped']} segments dropped; VO drift "
         f"over 20 m segments {label['translation_drift_pct']:.2f} % (worst sequence {label['translation_drift_pct_worst']:.2f} %), "
         f"{label['rotation_drift_deg_per_m']:.4f} deg/m"
@@ -92,6 +94,14 @@ def results_markdown(  # noqa: PLR0913
             out += [temporal_markdown(t, temporal_alpha, heading=""), ""]
         out += _driving(drive or {}, conclusions)
     return "\n".join(out).rstrip("\n") + "\n"
+
+
+def _timing_sentence(timing: dict) -> str:
+    minutes, seconds = divmod(round(timing["total_s"]), 60)
+    return (
+        f"Time: this `dvc repro` took {minutes} min {seconds} s from nothing on a {timing['machine']} "
+        f"(`metrics/pipeline_time.json`, written by `python benchmarks/pipeline_time.py --json`, with every stage's seconds).\n"
+    )
 
 
 def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
