@@ -30,9 +30,10 @@ def files(root: Path) -> dict[str, str]:
     }
 
 
-def start(args: list[str], tag: str) -> subprocess.Popen:
+def start(args: list[str], tag: str, stderr: Path | None = None) -> subprocess.Popen:
     env = {**os.environ, "OFFROAD_TEST_TAG": tag}
-    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    errors = subprocess.DEVNULL if stderr is None else stderr.open("w")
+    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=errors)
 
 
 def finish(args: list[str]) -> None:
@@ -40,12 +41,14 @@ def finish(args: list[str]) -> None:
     assert run.returncode == 0, run.stderr[-3000:]
 
 
-def interrupt(args: list[str], how: signal.Signals, after_s: float, ready: Callable[[], bool] = lambda: True) -> float:
+def interrupt(
+    args: list[str], how: signal.Signals, after_s: float, ready: Callable[[], bool] = lambda: True, stderr: Path | None = None
+) -> float:
     """Start the command, wait until ready() and then after_s, send `how`, and check that the run and
-    every process it started are gone."""
+    every process it started are gone (its error output into `stderr` when given)."""
     tag = uuid.uuid4().hex
     began = time.monotonic()
-    process = start(args, tag)
+    process = start(args, tag, stderr)
     deadline = time.monotonic() + 300
     while not ready() and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -94,12 +97,15 @@ def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_dri
         return ready
 
     # Mid-way through the labels (a worker killed while it starts: the test of map_processes below).
-    points = [(signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2)]
+    # SIGINT is Ctrl-C: one line, no traceback, exit 130.
+    points = [(signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2), (signal.SIGINT, 0.3)]
     for i, (how, share) in enumerate(points):
         out = tmp_path / f"run{i}"
-        interrupt(args(out), how, 0.0, ready=written(out, round(share * labels)))
-        if how == signal.SIGTERM:  # a stopped stage cleans up after itself
+        interrupt(args(out), how, 0.0, ready=written(out, round(share * labels)), stderr=tmp_path / f"stderr{i}")
+        if how != signal.SIGKILL:  # a stopped stage cleans up after itself
             assert not list(out.glob(".labels*"))
+        if how == signal.SIGINT:
+            assert (tmp_path / f"stderr{i}").read_text().strip().splitlines()[-1:] == ["interrupted: unfinished outputs removed"]
         finish(args(out))
         assert files(out) == expected
         assert not list(out.glob(".labels*"))  # a killed run's temporary folder is gone after the next run

@@ -27,6 +27,7 @@ def weighted_mse(predicted: torch.Tensor, true: torch.Tensor, weight: torch.Tens
 
 class SteeringTask(BaseTask):
     monitor, mode = "val/mae", "min"
+    loss_settings = "steering.lr, steering.momentum, steering.weight_decay"
 
     # Hyper-parameters saved flat in the checkpoint; build one from config with from_config.
     def __init__(  # noqa: PLR0913

@@ -14,6 +14,7 @@ from torchmetrics import Metric, MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassJaccardIndex
 from torchmetrics.functional.classification import binary_stat_scores
 
+from offroad_path.errors import InputError
 from offroad_path.models import build_model
 from offroad_path.statistics.scores import SCORES
 
@@ -45,6 +46,7 @@ class BaseTask(L.LightningModule):
 
     monitor: str
     mode: str  # "max" or "min"
+    loss_settings: str  # the settings a non-finite training loss points to, named in its error
 
     def __init__(self) -> None:
         """Saves the subclass's __init__ arguments as the checkpoint's hyper-parameters (Lightning reads
@@ -70,7 +72,14 @@ class BaseTask(L.LightningModule):
         raise NotImplementedError
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        return self._step(batch, "train")
+        """One step's loss; stops the run at the first non-finite one (a diverged run trains nothing
+        worth keeping), naming the settings of its loss terms and rate."""
+        loss = self._step(batch, "train")
+        if not torch.isfinite(loss):
+            raise InputError(
+                self.loss_settings, f"the training loss is {loss.item()} at step {self.global_step}: the run diverged; lower or check them"
+            )
+        return loss
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         self._step(batch, "val")
@@ -84,6 +93,7 @@ class BaseTask(L.LightningModule):
 
 class SegmentationTask(BaseTask):
     monitor, mode = "val/iou", "max"
+    loss_settings = "model.dice_weight, model.lr, model.weight_decay"
 
     # Each argument is a hyper-parameter saved flat in the checkpoint, which TorchModel rebuilds
     # the task from; conf/model/<name>.yaml builds one through segmentation_task (its `_target_`).
