@@ -157,3 +157,15 @@ def test_the_tour_is_every_stage_on_tiny_worlds_into_its_own_folder(compose_conf
     grid = yaml.safe_load((ROOT / "tour" / "params.yaml").read_text())
     assert {key: list(tour.evaluate[key]) for key in grid} == grid
     assert tour.mlflow.experiment != compose_config().mlflow.experiment and tour.trainer.max_epochs == 1
+
+
+def test_the_gpu_and_tour_presets_leave_mlflow_off_when_the_host_says_so(monkeypatch):
+    """gpu/repro.sh runs the GPU preset where MLflow is not installed: OFFROAD_MLFLOW=false turns it
+    off for the presets it runs, never for the committed laptop run."""
+    from offroad_path.config import load_config
+
+    monkeypatch.setenv("OFFROAD_MLFLOW", "false")
+    assert load_config("experiment=gpu").mlflow.enabled is False and load_config("experiment=tour").mlflow.enabled is False
+    assert load_config().mlflow.enabled is True
+    monkeypatch.delenv("OFFROAD_MLFLOW")
+    assert load_config("experiment=gpu").mlflow.enabled is True
