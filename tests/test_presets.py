@@ -62,8 +62,8 @@ def test_full_preset_drives_every_network_at_the_worlds_size(compose_config):
     assert not laptop.world.slip.enabled and not full.world.slip.enabled
 
 
-def test_laptop_reference_is_the_earlier_laptop_preset_one_override_away(compose_config):
-    """The reference of the rule for changes that alter results (docs/benchmark-history.md, "Three seeds"): the
+def test_laptop_reference_is_the_defaults_reference_one_override_away(compose_config):
+    """The reference of the rule for changes that alter results (CHANGELOG.md's benchmark history, "Three seeds"): the
     world at 512 x 288 and 4 epochs of pretraining; everything else is the default's."""
     laptop, reference = compose_config(), compose_config("experiment=laptop_reference")
     changed = {"world.width": 512, "world.height": 288, "postprocess.sigma": 6.0, "evaluate.figure_scale": 0.5,
