@@ -42,7 +42,7 @@ class PathScore(Metric):
 class BaseTask(L.LightningModule):
     """What every task of this project shares (torchgeo's pattern): subclasses build their network,
     loss and metrics in the configure_* hooks, name the validation metric that early stopping and
-    the best checkpoint follow, and write one `_step`; all train with the paper's SGD."""
+    the best checkpoint follow, write one `_step` and own their optimiser (configure_optimizers)."""
 
     monitor: str
     mode: str  # "max" or "min"
@@ -88,7 +88,7 @@ class BaseTask(L.LightningModule):
         self._step(batch, "test")
 
     def configure_optimizers(self):
-        return sgd_with_step_decay(self)  # PilotNet (the thesis's schedule, in epochs)
+        raise NotImplementedError  # each task owns its optimiser and schedule
 
 
 class SegmentationTask(BaseTask):
@@ -222,13 +222,3 @@ def optimizer_with_schedule(
 
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
     return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
-
-
-def sgd_with_step_decay(task: L.LightningModule):
-    """SGD with momentum and weight decay, the lr multiplied by lr_gamma every lr_step_epochs (0: fixed)."""
-    hp = task.hparams
-    optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
-    if hp.lr_step_epochs <= 0:
-        return optimizer
-    scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
-    return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
