@@ -230,7 +230,8 @@ def fit(
         logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
         logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
         if cfg.mlflow.log_models and spec.input_size[0]:
-            publish(logger.run_id, tracking_uri(cfg.mlflow), task, spec, best_score)
+            publish(logger.run_id, tracking_uri(cfg.mlflow), task, input_size=spec.input_size, manifests=spec.manifests,
+                    register_as=spec.register_as, score=best_score)  # fmt: skip
     return metrics
 
 
