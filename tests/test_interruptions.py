@@ -3,6 +3,7 @@ those of an uninterrupted run, no process of the killed run is left, no temporar
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -187,6 +188,27 @@ def test_a_label_worker_killed_from_outside_ends_the_stage_with_its_sequence_nam
         time.sleep(0.1)
     assert not tagged_processes(tag)
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no labels, no metrics, no temporary folder, no lock
+
+
+@pytest.mark.slow(seconds=20)
+def test_a_stage_stopped_by_sigterm_ends_its_mlflow_run_killed(two_drives, tmp_path):
+    """Once a stopped stage's run stayed RUNNING in MLflow for good: its handler exits without MLflow."""
+    import sqlite3
+
+    db = tmp_path / "mlflow.db"
+    args = [arg for arg in label_args(two_drives, tmp_path) if not arg.startswith("mlflow.")]
+    args += ["mlflow.enabled=true", f"mlflow.tracking_uri=sqlite:///{db}"]
+
+    def running() -> bool:
+        if not db.exists():
+            return False
+        with contextlib.suppress(sqlite3.OperationalError), sqlite3.connect(db) as store:
+            return bool(store.execute("select 1 from runs where status = 'RUNNING' and name = 'label'").fetchall())
+        return False
+
+    interrupt(args, signal.SIGTERM, 0.0, ready=running)
+    with sqlite3.connect(db) as store:
+        assert store.execute("select status from runs where name = 'label'").fetchall() == [("KILLED",)]
 
 
 @pytest.mark.slow(seconds=40)

@@ -40,7 +40,7 @@ from offroad_path.utils.outputs import Outputs, check_metrics_follow, check_outp
 from offroad_path.utils.parallel import stop_workers
 from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.threads import set_threads
-from offroad_path.utils.tracking import end_pipeline_parent
+from offroad_path.utils.tracking import end_open_runs_killed, end_pipeline_parent
 
 log = logging.getLogger("offroad_path")
 
@@ -119,6 +119,7 @@ def _stop(signum: int, frame: Any) -> None:
     stop_workers()
     remove_unfinished()
     release_locks()
+    end_open_runs_killed()
     os._exit(128 + signum)
 
 
