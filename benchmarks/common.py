@@ -263,3 +263,25 @@ def label_recording(recording: Path, out: Path, *overrides: str) -> Path:
     )
     label(cfg)
     return out
+
+
+def development_problem(data: Path) -> str | None:
+    """Why a run's development set cannot carry a search's statistics (its hierarchical bootstrap
+    resamples worlds, then blocks: at least 2 worlds), or None; said before any training."""
+    from offroad_path.data.manifest import read_manifest
+
+    manifest = data / "split" / "development.csv"
+    if not manifest.is_file():
+        return f"{manifest}: not found; run `dvc repro split` (or --data a run's data folder)"
+    worlds = {sample.sequence for sample in read_manifest(manifest)}  # a development world is one sequence
+    if len(worlds) < 2:
+        return (
+            f"{manifest}: {len(worlds)} development world(s); the search's intervals resample worlds and need at least 2 "
+            "(raise synthesize.test_worlds.development_blocks)"
+        )
+    return None
+
+
+def repeated(values: list[int]) -> list[int]:
+    """The values listed more than once, in order."""
+    return sorted({v for v in values if values.count(v) > 1})

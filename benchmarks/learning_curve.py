@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from common import development_problem, repeated
 
 ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = ("epochs", "steps", "wide")
@@ -217,13 +218,15 @@ def main() -> None:
 
     problems = [f"--models: unknown {m!r}; valid: {', '.join(MODELS)}" for m in args.models if m not in MODELS]
     problems += [f"--seeds: {s} is negative" for s in args.seeds if s < 0]
+    problems += [f"--seeds: {s} is listed twice (each seed trains once)" for s in repeated(args.seeds)]
+    problems += [f"--drives: {k} is listed twice" for k in repeated(args.drives)]
     problems += [f"--drives: {k} is not a number of drives (at least 1)" for k in args.drives if k < 1]
     problems += [f"--steps: {args.steps} is not positive"] if args.steps is not None and args.steps < 1 else []
     problems += [f"--resamples: {args.resamples} is not positive"] if args.resamples is not None and args.resamples < 1 else []
     if problems:
         parser.exit(2, f"error: {problems[0]}\n")
-    if not (args.data / "split" / "development.csv").is_file():
-        parser.exit(2, f"{args.data / 'split' / 'development.csv'}: not found; run `dvc repro split` (or --data a run's data folder)\n")
+    if problem := development_problem(args.data):
+        parser.exit(2, f"error: {problem}\n")
     from offroad_path.data.manifest import read_manifest
 
     drives = len({s.sequence for s in read_manifest(args.data / "split" / "train.csv")})

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from common import development_problem, repeated
 
 ROOT = Path(__file__).resolve().parents[1]
 # Each recipe: overrides over the default config. The table the search recorded is
@@ -123,6 +124,7 @@ def search(args: argparse.Namespace) -> dict:
     from offroad_path.data.loading import load_labels
     from offroad_path.evaluation.metrics import counts, mean_path, pooled
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
+    from offroad_path.models import BATCH_NORM_CHOICE
     from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.statistics.scores import iou
 
@@ -137,6 +139,8 @@ def search(args: argparse.Namespace) -> dict:
     rows = []
     for recipe in args.recipes:
         for model in args.models:
+            if "model.batch_norm=true" in RECIPES[recipe] and model not in BATCH_NORM_CHOICE:
+                continue  # batch norm is a choice of FCN-8s alone (models.BATCH_NORM_CHOICE)
             runs_dirs = [args.work / f"{recipe}_{model}_{s}" for s in args.seeds]
             overrides = RECIPES[recipe] + args.override
             runs = [
@@ -218,10 +222,11 @@ def main() -> None:
     problems = [f"--recipes: unknown {r!r}; valid: {', '.join(RECIPES)}" for r in args.recipes if r not in RECIPES]
     problems += [f"--models: unknown {m!r}; valid: {', '.join(MODELS)}" for m in args.models if m not in MODELS]
     problems += [f"--seeds: {s} is negative" for s in args.seeds if s < 0]
+    problems += [f"--seeds: {s} is listed twice (each seed trains once)" for s in repeated(args.seeds)]
     problems += [] if 0 < args.val_every <= 1 else [f"--val-every: {args.val_every} is not in (0, 1]"]
     problems += [] if args.resamples > 0 else [f"--resamples: {args.resamples} is not positive"]
-    if not (args.data / "split" / "development.csv").is_file():
-        problems.append(f"{args.data / 'split' / 'development.csv'}: not found; run `dvc repro split` (or --data a run's data folder)")
+    if not problems and (problem := development_problem(args.data)):
+        problems.append(problem)
     if problems:
         parser.exit(2, f"error: {problems[0]}\n")
     result = search(args)

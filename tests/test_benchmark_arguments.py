@@ -19,6 +19,8 @@ from helpers import ROOT
         ("learning_curve.py", ["--seeds", "-5"], "--seeds: -5 is negative"),
         ("recipe_search.py", ["--recipes", "nope"], "--recipes: unknown 'nope'"),
         ("recipe_search.py", ["--val-every", "2"], "--val-every: 2.0 is not in (0, 1]"),
+        ("recipe_search.py", ["--seeds", "0", "0"], "--seeds: 0 is listed twice"),
+        ("learning_curve.py", ["--seeds", "1", "1"], "--seeds: 1 is listed twice"),
     ],
 )
 def test_a_bad_argument_is_one_line_and_exit_2(script, arguments, says, tmp_path):
@@ -26,6 +28,24 @@ def test_a_bad_argument_is_one_line_and_exit_2(script, arguments, says, tmp_path
                          capture_output=True, text=True, timeout=120)  # fmt: skip
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1 and lines[0].startswith(f"error: {says}"), run.stderr
+    assert not (tmp_path / "w").exists()
+
+
+@pytest.mark.parametrize("script", ["recipe_search.py", "learning_curve.py"])
+def test_a_development_set_of_one_world_is_refused_before_training(script, tmp_path):
+    """Once every search on one development world trained, then failed on its interval (AttributeError)."""
+    from offroad_path.data.manifest import Sample, write_manifest
+
+    split = tmp_path / "data" / "split"
+    split.mkdir(parents=True)
+    rows = [Sample("dev_000", f0, False, "i.png", "l.png", "", "", 100.0, 0.2) for f0 in (0, 5, 10)]
+    for part in ("train", "val", "development"):
+        write_manifest(split / f"{part}.csv", rows if part == "development" else [])
+    arguments = ["--data", str(tmp_path / "data"), "--work", str(tmp_path / "w")]
+    run = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *arguments], capture_output=True, text=True, timeout=120)
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1, run.stderr
+    assert lines[0].startswith(f"error: {split / 'development.csv'}: 1 development world(s)") and "at least 2" in lines[0]
     assert not (tmp_path / "w").exists()
 
 

@@ -58,6 +58,25 @@ def test_the_stages_of_one_dvc_repro_share_one_parent_run(tmp_path):
     assert json.loads((repo / "first.json").read_text())["parent"] != first["parent"]  # the next repro: a parent of its own
 
 
+@pytest.mark.slow(seconds=30)
+def test_a_stage_refused_before_any_work_ends_the_repros_parent_failed(tmp_path):
+    """Once the refusal came before the code that ends the parent: the repro failed, its parent FINISHED."""
+    repo, db = tmp_path / "repo", tmp_path / "mlflow.db"
+    repo.mkdir()
+    git(repo, "init", "-q")
+    subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
+    refused = f"{sys.executable} -m offroad_path.split split.block_m=-4 mlflow.tracking_uri=sqlite:///{db}"
+    stages = {"first": {"cmd": f'{sys.executable} -c "{STAGE.format(db=db)}" first.json', "outs": ["first.json"]},
+              "second": {"cmd": refused, "deps": ["first.json"], "outs": ["second"]}}  # fmt: skip
+    (repo / "dvc.yaml").write_text(json.dumps({"stages": stages}))
+    repro = subprocess.run([sys.executable, "-m", "dvc", "repro", "-q"], cwd=repo, capture_output=True, text=True)
+    assert repro.returncode != 0 and "split.block_m=-4" in repro.stdout + repro.stderr
+    parent = json.loads((repo / "first.json").read_text())["parent"]
+    with sqlite3.connect(db) as store:
+        (status,) = store.execute("select status from runs where run_uuid = ?", (parent,)).fetchone()
+    assert status == "FAILED"
+
+
 def test_outside_dvc_there_is_no_parent(tmp_path):
     from omegaconf import OmegaConf
 

@@ -28,8 +28,6 @@ def test_every_stated_config_value_is_the_composed_configs():
     pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
     wrong = []
     for page in pages:
-        if page.name == "benchmark-history.md":  # history: what earlier runs used
-            continue
         for key, stated in STATED.findall(page.read_text()):
             found = [key] if key in config else [k for k in config if k.endswith(f".{key}")]
             if len(found) != 1:
@@ -44,7 +42,7 @@ def test_every_file_the_docs_and_configs_name_exists():
     path written in the README, docs/, conf/ and the code's docstrings is a file or folder of this
     checkout (history pages excepted: they name what was; extending.md's example network, mynet, too)."""
     named = re.compile(r"(?<![\w/.-])((?:src|conf|tools|benchmarks|tests|docs)/[\w./-]*[\w/])")
-    history = {"CHANGELOG.md", "benchmark-history.md"}
+    history = {"CHANGELOG.md"}
     pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "conf").rglob("*.yaml")),
              *sorted((ROOT / "src").rglob("*.py")), *sorted((ROOT / "tools").glob("*.py"))]  # fmt: skip
 

@@ -78,3 +78,36 @@ def test_the_check_sees_an_upward_import(tmp_path, monkeypatch, source, upward):
     monkeypatch.setattr(f"{__name__}.PACKAGE", package)
     caught = [a for a, b, _ in imports() if LAYER[b] > LAYER[a]]
     assert bool(caught) is upward
+
+
+def module_imports() -> dict[str, set[str]]:
+    """Module -> the offroad_path modules it imports (a name imported from a package counts as the
+    package's module when it is no module of its own), at any depth, TYPE_CHECKING blocks included."""
+    graph: dict[str, set[str]] = defaultdict(set)
+    modules = {".".join(p.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__") for p in PACKAGE.rglob("*.py")}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__")
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("offroad_path"):
+                names = [f"{node.module}.{a.name}" for a in node.names]
+                graph[module] |= {n for n in names if n in modules} or {node.module}
+            elif isinstance(node, ast.Import):
+                graph[module] |= {a.name for a in node.names if a.name in modules}
+    return graph
+
+
+def test_no_import_circle_between_modules():
+    """No module reaches itself through imports (a circle of two, training/run and training/published,
+    once hid behind TYPE_CHECKING)."""
+    graph = module_imports()
+    circles = []
+    for start in sorted(graph):
+        seen, frontier = set(), [start]
+        while frontier:
+            for nxt in graph.get(frontier.pop(), ()):
+                if nxt == start:
+                    circles.append(start)
+                elif nxt not in seen:
+                    seen.add(nxt)
+                    frontier.append(nxt)
+    assert sorted(set(circles)) == []

@@ -3,6 +3,7 @@ those of an uninterrupted run, no process of the killed run is left, no temporar
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -30,9 +31,10 @@ def files(root: Path) -> dict[str, str]:
     }
 
 
-def start(args: list[str], tag: str) -> subprocess.Popen:
+def start(args: list[str], tag: str, stderr: Path | None = None) -> subprocess.Popen:
     env = {**os.environ, "OFFROAD_TEST_TAG": tag}
-    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    errors = subprocess.DEVNULL if stderr is None else stderr.open("w")
+    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=errors)
 
 
 def finish(args: list[str]) -> None:
@@ -40,12 +42,14 @@ def finish(args: list[str]) -> None:
     assert run.returncode == 0, run.stderr[-3000:]
 
 
-def interrupt(args: list[str], how: signal.Signals, after_s: float, ready: Callable[[], bool] = lambda: True) -> float:
+def interrupt(
+    args: list[str], how: signal.Signals, after_s: float, ready: Callable[[], bool] = lambda: True, stderr: Path | None = None
+) -> float:
     """Start the command, wait until ready() and then after_s, send `how`, and check that the run and
-    every process it started are gone."""
+    every process it started are gone (its error output into `stderr` when given)."""
     tag = uuid.uuid4().hex
     began = time.monotonic()
-    process = start(args, tag)
+    process = start(args, tag, stderr)
     deadline = time.monotonic() + 300
     while not ready() and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -94,12 +98,15 @@ def test_label_killed_anywhere_then_rerun_gives_the_uninterrupted_labels(two_dri
         return ready
 
     # Mid-way through the labels (a worker killed while it starts: the test of map_processes below).
-    points = [(signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2)]
+    # SIGINT is Ctrl-C: one line, no traceback, exit 130.
+    points = [(signal.SIGKILL, 0.4), (signal.SIGTERM, 0.2), (signal.SIGINT, 0.3)]
     for i, (how, share) in enumerate(points):
         out = tmp_path / f"run{i}"
-        interrupt(args(out), how, 0.0, ready=written(out, round(share * labels)))
-        if how == signal.SIGTERM:  # a stopped stage cleans up after itself
+        interrupt(args(out), how, 0.0, ready=written(out, round(share * labels)), stderr=tmp_path / f"stderr{i}")
+        if how != signal.SIGKILL:  # a stopped stage cleans up after itself
             assert not list(out.glob(".labels*"))
+        if how == signal.SIGINT:
+            assert (tmp_path / f"stderr{i}").read_text().strip().splitlines()[-1:] == ["interrupted: unfinished outputs removed"]
         finish(args(out))
         assert files(out) == expected
         assert not list(out.glob(".labels*"))  # a killed run's temporary folder is gone after the next run
@@ -181,6 +188,27 @@ def test_a_label_worker_killed_from_outside_ends_the_stage_with_its_sequence_nam
         time.sleep(0.1)
     assert not tagged_processes(tag)
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no labels, no metrics, no temporary folder, no lock
+
+
+@pytest.mark.slow(seconds=20)
+def test_a_stage_stopped_by_sigterm_ends_its_mlflow_run_killed(two_drives, tmp_path):
+    """Once a stopped stage's run stayed RUNNING in MLflow for good: its handler exits without MLflow."""
+    import sqlite3
+
+    db = tmp_path / "mlflow.db"
+    args = [arg for arg in label_args(two_drives, tmp_path) if not arg.startswith("mlflow.")]
+    args += ["mlflow.enabled=true", f"mlflow.tracking_uri=sqlite:///{db}"]
+
+    def running() -> bool:
+        if not db.exists():
+            return False
+        with contextlib.suppress(sqlite3.OperationalError), sqlite3.connect(db) as store:
+            return bool(store.execute("select 1 from runs where status = 'RUNNING' and name = 'label'").fetchall())
+        return False
+
+    interrupt(args, signal.SIGTERM, 0.0, ready=running)
+    with sqlite3.connect(db) as store:
+        assert store.execute("select status from runs where name = 'label'").fetchall() == [("KILLED",)]
 
 
 @pytest.mark.slow(seconds=40)

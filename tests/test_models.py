@@ -43,6 +43,14 @@ def test_head_swap_keeps_every_other_weight(name):
     assert model(torch.randn(1, 3, 32, 32)).shape[1] == 2
 
 
+@pytest.mark.parametrize("name", ["unet", "segnet"])
+def test_batch_norm_is_refused_where_it_is_no_choice(name):
+    """Once `model.batch_norm=false` trained U-Net without batch norm, the config saying it is no choice there."""
+    with pytest.raises(ValueError, match=rf"^model\.batch_norm=False: {name} has batch norm after every convolution as published"):
+        build_model(name, 2, 0.125, batch_norm=False)
+    assert any(isinstance(m, torch.nn.BatchNorm2d) for m in build_model("fcn", 2, 0.125, batch_norm=True).modules())
+
+
 def test_unknown_model_lists_valid_names():
     with pytest.raises(ValueError, match="valid: " + ", ".join(sorted(MODELS))):
         build_model("deeplab")

@@ -155,6 +155,19 @@ def test_label_of_other_data_never_writes_the_pipelines_metrics(compose_config, 
     refused(label, cfg, capsys, tmp_path, "label.metrics_path", *says)
 
 
+def test_label_of_other_recordings_named_by_paths_never_writes_the_pipelines_metrics(compose_config, recordings, tmp_path, capsys):
+    """The same through `paths.recordings_dir`, the pipeline's labels and metrics folders left as they
+    are: the recordings lie outside the root's own folders, so the run is of other data. Refused
+    naming label.metrics_path, the committed metrics and labels untouched."""
+    pipeline = tmp_path / "pipeline"
+    metrics = pipeline / "metrics" / "label.json"
+    metrics.parent.mkdir(parents=True)
+    write_text_atomic(metrics, '{"labels": 1356}\n', "label")
+    cfg = compose_config(f"paths.root={pipeline}", f"paths.recordings_dir={recordings}", "label.workers=1", "mlflow.enabled=false")
+    refused(label, cfg, capsys, tmp_path, "label.metrics_path", "outside the pipeline's folders", f"the input {recordings}")
+    assert metrics.read_text() == '{"labels": 1356}\n' and not (pipeline / "data" / "labels").exists()
+
+
 def test_metrics_beside_the_outputs_of_other_data_are_allowed(tmp_path):
     outputs = Outputs("label", folders={"label.out_dir": tmp_path / "mine" / "labels"},
                       files={"label.metrics_path": tmp_path / "mine" / "label.json"}, inputs=[tmp_path / "copy"])  # fmt: skip

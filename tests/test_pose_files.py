@@ -58,7 +58,7 @@ def test_a_step_no_vehicle_makes_is_refused_at_the_recordings_frame_rate(tmp_pat
     assert max_steps(None, 3, 60.0) == pytest.approx([60.0, 60.0])  # no times.txt: 1 s per frame
 
 
-def test_the_sequence_checker_refuses_the_jump_the_label_stage_refuses(drive, tmp_path):
+def test_the_sequence_checker_refuses_the_jump_the_label_stage_refuses(drive, tmp_path, capsys):
     copy = tmp_path / "drive"
     shutil.copytree(drive / "drive", copy, ignore=shutil.ignore_patterns("depth", "semantic"))
     poses = read_poses(copy / "poses.txt")
@@ -72,6 +72,15 @@ def test_the_sequence_checker_refuses_the_jump_the_label_stage_refuses(drive, tm
     assert subprocess.run([*check, "--max-speed-mps", "1e6"], capture_output=True, text=True).returncode == 0
     wrong = subprocess.run([*check, "--max-speed-mps", "0"], capture_output=True, text=True)
     assert wrong.returncode == 2 and "--max-speed-mps" in wrong.stderr
+    from offroad_path.sequence.__main__ import main as check_sequences  # the same in-process: the speed it was given is named
+
+    for speed in ("inf", "nan"):
+        with pytest.raises(SystemExit) as stopped:
+            check_sequences([str(copy), "--max-speed-mps", speed])
+        assert stopped.value.code == 2
+    with pytest.raises(SystemExit) as stopped:
+        check_sequences([str(copy), "--max-speed-mps", "20"])
+    assert stopped.value.code == 2 and "more than 20 m at --max-speed-mps" in capsys.readouterr().err
 
 
 def test_poses_scaled_past_any_number_are_refused(tmp_path):
@@ -143,19 +152,22 @@ def test_bag_poses_are_put_in_stamp_order_and_conflicting_or_broken_ones_refused
 
 
 @pytest.mark.slow(seconds=15)  # a stage's process each: its imports take most of it
-@pytest.mark.parametrize("root", [".", "./", "{checkout}", "../{name}", "{link}", "{metrics_link}", "/"])
+@pytest.mark.parametrize("root", [".", "./", "{checkout}", "../{name}", "{link}", "{metrics_link}", "/", "..@../dvc.yaml:label"])
 def test_a_root_that_is_in_or_holds_the_checkout_is_refused_and_nothing_is_written(tmp_path, root):
     """`paths=own` with a root that is the checkout, in it, holding it, or reaching it through a link
-    (the root itself, or its metrics/): one line naming the key, exit 2, the committed metrics untouched."""
+    (the root itself, or its metrics/): one line naming the key, exit 2, the committed metrics untouched.
+    The exception for the checkout's own pipelines run by DVC holds for those alone: a DVC_STAGE naming
+    a dvc.yaml outside the checkout (`../dvc.yaml`, whose folder holds it) is no exception."""
     from helpers import ROOT
 
     (tmp_path / "link").symlink_to(ROOT)
     (tmp_path / "own").mkdir()
     (tmp_path / "own" / "metrics").symlink_to(ROOT / "metrics")
-    root = root.format(checkout=ROOT, name=ROOT.name, link=tmp_path / "link", metrics_link=tmp_path / "own")
+    root, _, dvc_stage = root.format(checkout=ROOT, name=ROOT.name, link=tmp_path / "link", metrics_link=tmp_path / "own").partition("@")
+    env = {k: v for k, v in os.environ.items() if k != "DVC_STAGE"} | ({"DVC_STAGE": dvc_stage} if dvc_stage else {})
     before = {p: p.stat().st_mtime_ns for p in (ROOT / "metrics").rglob("*") if p.is_file()}
     run = subprocess.run([sys.executable, "-m", "offroad_path.label", "paths=own", f"paths.root={root}"], cwd=ROOT,
-                         capture_output=True, text=True, timeout=120)  # fmt: skip
+                         capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1, run.stderr
     assert re.match(r"error: paths\.(root|metrics_dir): .* resolves to .*, which (is|is inside|holds) this checkout", lines[0])

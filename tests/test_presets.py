@@ -62,8 +62,8 @@ def test_full_preset_drives_every_network_at_the_worlds_size(compose_config):
     assert not laptop.world.slip.enabled and not full.world.slip.enabled
 
 
-def test_laptop_reference_is_the_earlier_laptop_preset_one_override_away(compose_config):
-    """The reference of the rule for changes that alter results (docs/benchmark-history.md, "Three seeds"): the
+def test_laptop_reference_is_the_defaults_reference_one_override_away(compose_config):
+    """The reference of the rule for changes that alter results (CHANGELOG.md's benchmark history, "Three seeds"): the
     world at 512 x 288 and 4 epochs of pretraining; everything else is the default's."""
     laptop, reference = compose_config(), compose_config("experiment=laptop_reference")
     changed = {"world.width": 512, "world.height": 288, "postprocess.sigma": 6.0, "evaluate.figure_scale": 0.5,
@@ -157,3 +157,15 @@ def test_the_tour_is_every_stage_on_tiny_worlds_into_its_own_folder(compose_conf
     grid = yaml.safe_load((ROOT / "tour" / "params.yaml").read_text())
     assert {key: list(tour.evaluate[key]) for key in grid} == grid
     assert tour.mlflow.experiment != compose_config().mlflow.experiment and tour.trainer.max_epochs == 1
+
+
+def test_the_gpu_and_tour_presets_leave_mlflow_off_when_the_host_says_so(monkeypatch):
+    """gpu/repro.sh runs the GPU preset where MLflow is not installed: OFFROAD_MLFLOW=false turns it
+    off for the presets it runs, never for the committed laptop run."""
+    from offroad_path.config import load_config
+
+    monkeypatch.setenv("OFFROAD_MLFLOW", "false")
+    assert load_config("experiment=gpu").mlflow.enabled is False and load_config("experiment=tour").mlflow.enabled is False
+    assert load_config().mlflow.enabled is True
+    monkeypatch.delenv("OFFROAD_MLFLOW")
+    assert load_config("experiment=gpu").mlflow.enabled is True

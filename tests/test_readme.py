@@ -77,7 +77,19 @@ def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
     assert slip.startswith("PilotNet trained on slip, the same check: seed 2 0.213") and "Seed 2 collapsed (1 of 1" in slip
 
 
-HISTORY_PAGES = {"docs/benchmark-history.md"}  # history lives here and in CHANGELOG.md
+HISTORY_PAGES: set[str] = set()  # history lives in CHANGELOG.md alone
+
+
+def test_the_readme_and_the_docs_name_no_commit():
+    """A "before" is rebuilt from a tag or the CHANGELOG's entry: no commit hash in the README or docs/
+    (history lives in CHANGELOG.md)."""
+    commit = re.compile(r"(?<![\w./-])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}(?![\w-])")
+    found = [
+        f"{path.name}: {hit}"
+        for path in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+        for hit in commit.findall(path.read_text())
+    ]
+    assert not found, found
 
 
 def test_the_product_holds_no_issue_number_and_the_docs_no_date():

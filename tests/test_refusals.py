@@ -105,6 +105,37 @@ def test_values_without_meaning_are_refused_naming_the_key(override):
         validate_config(load_config(override))
 
 
+@pytest.mark.parametrize(
+    ("override", "says"),
+    [("model.dice_weight=1e39", r"must be a number >= 0 in float32, the precision it is used in"),
+     ("model.lr=1e-50", r"must be a number > 0 in float32"), ("steering.weight_decay=nan", r"must be a number >= 0"),
+     ("steering.momentum=1.5", r"must be a number in \[0, 1\)"), ("steering.lr_gamma=0", r"must be a number in \(0, 1\]"),
+     ("steering.lr_step_epochs=0", r"must be a number >= 1")],
+)  # fmt: skip
+def test_a_setting_that_is_no_number_in_float32_or_a_steering_rate_without_meaning_is_refused(override, says):
+    """Finite in float64 is not enough: the losses and rates are float32. And every optimiser key of
+    PilotNet has a rule, as the path networks' have."""
+    key = override.split("=")[0]
+    with pytest.raises(ConfigValueError, match=rf"^{key.replace('.', '[.]')}=.*{says}"):
+        validate_config(load_config(override))
+
+
+def test_a_run_stops_at_its_first_non_finite_loss_naming_the_loss_settings(compose_config, tiny_overrides):
+    """A diverging run once trained to its end on an infinite loss and failed on a checkpoint's weight."""
+    import torch
+    from hydra.utils import instantiate
+
+    from offroad_path.steering.task import SteeringTask
+
+    task = instantiate(compose_config(*tiny_overrides).model, num_classes=2, channels_last=False, _convert_="all")
+    image = torch.full((2, 3, 48, 64), float("nan"))
+    with pytest.raises(InputError, match=r"^model\.dice_weight, model\.lr, model\.weight_decay: the training loss is nan at step 0"):
+        task.training_step({"image": image, "target": torch.zeros(2, 48, 64, dtype=torch.long)}, 0)
+    pilotnet = SteeringTask(width=200, height=66, lr=1e-4, lr_step_epochs=5, lr_gamma=0.5, momentum=0.9, weight_decay=0.0)
+    with pytest.raises(InputError, match=r"^steering\.lr, steering\.momentum, steering\.weight_decay: the training loss is nan"):
+        pilotnet.training_step({"image": torch.zeros(2, 3, 66, 200), "steering": torch.tensor([0.1, float("nan")])}, 0)
+
+
 @pytest.mark.parametrize("weight", ["inf", "nan", "-1"])
 def test_a_look_weight_that_is_no_weight_is_refused_naming_the_weights(weight):
     """Once "Probabilities contain NaN" from NumPy, naming no key, after the world had started."""

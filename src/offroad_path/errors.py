@@ -13,6 +13,7 @@ from pathlib import Path
 from omegaconf.errors import InterpolationToMissingValueError, MissingMandatoryValue
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command Ctrl-C stopped
 
 
 class InputError(ValueError):
@@ -51,6 +52,9 @@ def clear_errors() -> Iterator[None]:
     except ValueError as e:  # InputError, CheckpointError, ConfigValueError are ValueErrors
         print(f"error: {one_line(e)}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT) from e
+    except KeyboardInterrupt:  # Ctrl-C: the outputs' own clean-up has run on the way out; no traceback
+        print("interrupted: unfinished outputs removed", file=sys.stderr)
+        raise SystemExit(EXIT_INTERRUPTED) from None
 
 
 def one_line(error: BaseException, with_cause: bool = False) -> str:

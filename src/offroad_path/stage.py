@@ -40,7 +40,7 @@ from offroad_path.utils.outputs import Outputs, check_metrics_follow, check_outp
 from offroad_path.utils.parallel import stop_workers
 from offroad_path.utils.ranks import is_global_zero
 from offroad_path.utils.threads import set_threads
-from offroad_path.utils.tracking import end_pipeline_parent
+from offroad_path.utils.tracking import end_open_runs_killed, end_pipeline_parent
 
 log = logging.getLogger("offroad_path")
 
@@ -91,7 +91,11 @@ def reads(*groups: str, writes: Callable[[DictConfig], Outputs] | None = None) -
             outputs = writes(own)
             check_outputs(outputs)  # the output rule's refusals first, then where the metrics go
             if (paths := OmegaConf.select(cfg, "paths")) is not None:
-                check_metrics_follow(outputs, paths.metrics_dir, (paths.data_dir, paths.recordings_dir))
+                # The pipeline's own folders are where its root puts them (conf/paths: data/, and
+                # recordings/ for paths=own), never whatever paths.recordings_dir names: a run of other
+                # recordings is a run of other data, whose metrics must not replace the pipeline's.
+                pipeline_dirs = (paths.data_dir, os.path.join(paths.root, "recordings"))
+                check_metrics_follow(outputs, paths.metrics_dir, pipeline_dirs)
             if trains and not is_global_zero():
                 # Another rank of a distributed training run: rank 0 holds the locks and writes the
                 # outputs; this one writes nothing, but its outputs obey the same rule (checked above).
@@ -115,6 +119,7 @@ def _stop(signum: int, frame: Any) -> None:
     stop_workers()
     remove_unfinished()
     release_locks()
+    end_open_runs_killed()
     os._exit(128 + signum)
 
 
@@ -141,18 +146,18 @@ def run_stage(stage: Stage, cfg: DictConfig) -> Any:
     """What a stage's command does with its composed config: check every value against the schemas'
     rules, set the process's threads (`threads`), run, and turn bad input into one line and exit status 2."""
     with clear_errors():
-        validate_config(cfg, getattr(stage, "reads", None))
-        check_root(cfg)
-        set_threads(cfg.threads)
-        if "mlflow" not in getattr(stage, "reads", ()) or not cfg.mlflow.enabled:
-            return stage(cfg)
+        tracked = "mlflow" in getattr(stage, "reads", ()) and OmegaConf.select(cfg, "mlflow.enabled") is True
         failed = True
         try:
+            validate_config(cfg, getattr(stage, "reads", None))
+            check_root(cfg)
+            set_threads(cfg.threads)
             result = stage(cfg)
             failed = False
             return result
-        finally:  # under `dvc repro`: the repro's MLflow parent run ends with its last stage
-            end_pipeline_parent(cfg, failed)
+        finally:  # under `dvc repro`: the repro's MLflow parent run ends with its last stage, FAILED when refused too
+            if tracked:
+                end_pipeline_parent(cfg, failed)
 
 
 def check_root(cfg: DictConfig) -> None:
@@ -167,7 +172,8 @@ def check_root(cfg: DictConfig) -> None:
         return
     checkout = CONF_DIR.parent.resolve()
     pipeline = os.environ.get("DVC_STAGE", "").partition(":")[0]  # DVC names the stage it runs: own/dvc.yaml:label
-    if pipeline.endswith("dvc.yaml") and (checkout / pipeline).parent.resolve() == Path(root).resolve():
+    inside = not Path(pipeline).is_absolute() and ".." not in Path(pipeline).parts  # a pipeline of this checkout's own
+    if inside and pipeline.endswith("dvc.yaml") and (checkout / pipeline).parent.resolve() == Path(root).resolve():
         return
     for key in ("root", "data_dir", "metrics_dir"):
         folder = Path(cfg.paths[key]).resolve()

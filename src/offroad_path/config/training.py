@@ -127,10 +127,10 @@ class SteeringConfig:
     batch_size: int = setting(at_least(1))
     lr: float = setting(positive())  # CPU-sized default; experiment=paper sets the paper's 2e-4
     optimizer: str = setting(one_of(("sgd", "adamw")))  # sgd: the thesis's, with step decay; adamw: cosine to 0 over the run
-    lr_step_epochs: int = MISSING  # sgd's step decay every N epochs
-    lr_gamma: float = MISSING
-    momentum: float = MISSING
-    weight_decay: float = MISSING
+    lr_step_epochs: int = setting(at_least(1))  # sgd's step decay every N epochs
+    lr_gamma: float = setting(between(0, 1, low_open=True))
+    momentum: float = setting(between(0, 1, high_open=True))
+    weight_decay: float = setting(at_least(0))
     max_epochs: int = setting(at_least(1))
     patience: int = setting(at_least(1))  # early stopping on validation mean absolute error
     mirror: bool = MISSING  # add mirrored copies with negated steering

@@ -16,7 +16,7 @@ from offroad_path.data.manifest import Sample, parse_boolean
 from offroad_path.evaluation.metrics import pooled
 from offroad_path.statistics.bootstrap import Interval
 from offroad_path.statistics.scores import iou as iou_score
-from offroad_path.world.groups import GROUPS, OLD_LOOK
+from offroad_path.world.groups import GROUPS, SINGLE_LOOK
 
 if TYPE_CHECKING:
     from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
@@ -31,7 +31,7 @@ def parse_row(row: dict[str, str]) -> dict:
         "fork": parse_boolean(row["fork"]),
         "surface": row["surface"],
         "bend_radius_m": float(row["bend_radius_m"]),
-    } | {k: row.get(k) or v for k, v in OLD_LOOK.items()}  # rendered before world.appearance: the old look
+    } | {k: row.get(k) or v for k, v in SINGLE_LOOK.items()}  # rendered without world.appearance: its single look
 
 
 def read_conditions(samples: list[Sample]) -> list[dict] | None:

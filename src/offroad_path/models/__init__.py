@@ -8,12 +8,20 @@ from offroad_path.models.segnet import SegNet
 from offroad_path.models.unet import UNet
 
 MODELS: dict[str, type[SegmentationNet]] = {"segnet": SegNet, "fcn": FCN8s, "unet": UNet}
+# Networks whose normalisation is a choice (model.batch_norm): FCN-8s has none as published. SegNet
+# and U-Net have batch norm after every convolution as published, which is theirs to keep.
+BATCH_NORM_CHOICE = ("fcn",)
 
 
 def build_model(name: str, num_classes: int = 2, width: float = 1.0, batch_norm: bool | None = None) -> SegmentationNet:
     """batch_norm: the choice of a network that has one (FCN-8s); None: the network's own."""
     if name not in MODELS:
         raise ValueError(f"unknown model {name!r}; valid: {', '.join(sorted(MODELS))}")
+    if batch_norm is not None and name not in BATCH_NORM_CHOICE:
+        raise ValueError(
+            f"model.batch_norm={batch_norm}: {name} has batch norm after every convolution as published, not a choice "
+            f"(null; a choice of {', '.join(BATCH_NORM_CHOICE)} only)"
+        )
     return MODELS[name](num_classes=num_classes, width=width, **({} if batch_norm is None else {"batch_norm": batch_norm}))
 
 

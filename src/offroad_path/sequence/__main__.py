@@ -9,6 +9,8 @@ its poses file, without occlusion). Bad input: one line naming the file, exit 2.
 
 from __future__ import annotations
 
+import math
+
 from omegaconf import OmegaConf
 
 from offroad_path.config.common import CONF_DIR
@@ -25,11 +27,12 @@ def label_max_speed_mps() -> float:
 
 def describe(path: str, max_speed_mps: float | None = None) -> list[str]:
     speed = label_max_speed_mps() if max_speed_mps is None else max_speed_mps
+    setting = "label.poses.max_speed_mps" if max_speed_mps is None else "--max-speed-mps"
     lines = []
     for root in find_sequences(path):
         seq = open_sequence(root)
         if seq.poses_path is not None:  # the jump check the label stage makes on a poses file
-            read_poses(seq.poses_path, expected_rows=len(seq), max_steps_m=max_steps(seq.times, len(seq), speed))
+            read_poses(seq.poses_path, len(seq), max_steps(seq.times, len(seq), speed), speed_setting=setting)
         for i in range(len(seq)):  # every frame: a truncated one in the middle must not pass
             seq.load_left(i)
             if not seq.mono:
@@ -59,8 +62,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("paths", nargs="+", help="a sequence folder, or a folder of sequences")
     parser.add_argument("--max-speed-mps", type=float, default=None, help="the top speed poses may show (default: the label stage's)")
     args = parser.parse_args(argv)
-    if args.max_speed_mps is not None and not args.max_speed_mps > 0:
-        parser.error(f"--max-speed-mps: must be above 0 m/s, got {args.max_speed_mps}")
+    if args.max_speed_mps is not None and not 0 < args.max_speed_mps < math.inf:
+        parser.error(f"--max-speed-mps: must be a finite speed above 0 m/s, got {args.max_speed_mps}")
     with clear_errors():
         for path in args.paths:
             for line in describe(path, args.max_speed_mps):

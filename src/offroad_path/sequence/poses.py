@@ -9,7 +9,9 @@ import numpy as np
 from offroad_path.errors import InputError
 
 
-def read_poses(path: Path, expected_rows: int | None = None, max_steps_m: np.ndarray | None = None) -> np.ndarray:
+def read_poses(
+    path: Path, expected_rows: int | None = None, max_steps_m: np.ndarray | None = None, speed_setting: str = "label.poses.max_speed_mps"
+) -> np.ndarray:
     """(N, 4, 4) camera-to-world poses, checked: 12 finite numbers per row, a rotation in each (R^T R = I
     and det R = +1: a mirrored frame is no pose), and, with max_steps_m (N - 1,), no step from one pose
     to the next longer than it allows."""
@@ -24,9 +26,7 @@ def read_poses(path: Path, expected_rows: int | None = None, max_steps_m: np.nda
         steps = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
         if len(far := np.flatnonzero(~(steps <= max_steps_m))):
             i = far[0]
-            raise InputError(
-                path, f"row {i + 2} is {steps[i]:.3g} m from row {i + 1}, more than {max_steps_m[i]:.3g} m at label.poses.max_speed_mps"
-            )
+            raise InputError(path, f"row {i + 2} is {steps[i]:.3g} m from row {i + 1}, more than {max_steps_m[i]:.3g} m at {speed_setting}")
     return poses
 
 

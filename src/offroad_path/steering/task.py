@@ -17,7 +17,7 @@ from omegaconf import DictConfig
 from torchmetrics import MeanAbsoluteError
 
 from offroad_path.steering.pilotnet import PilotNet
-from offroad_path.training.task import OPTIMIZERS, BaseTask, optimizer_with_schedule, sgd_with_step_decay
+from offroad_path.training.task import OPTIMIZERS, BaseTask, optimizer_with_schedule
 
 
 def weighted_mse(predicted: torch.Tensor, true: torch.Tensor, weight: torch.Tensor | None = None) -> torch.Tensor:
@@ -27,6 +27,7 @@ def weighted_mse(predicted: torch.Tensor, true: torch.Tensor, weight: torch.Tens
 
 class SteeringTask(BaseTask):
     monitor, mode = "val/mae", "min"
+    loss_settings = "steering.lr, steering.momentum, steering.weight_decay"
 
     # Hyper-parameters saved flat in the checkpoint; build one from config with from_config.
     def __init__(  # noqa: PLR0913
@@ -105,3 +106,13 @@ class SteeringTask(BaseTask):
         self.log(f"{split}/loss", loss, on_step=split == "train", on_epoch=True, batch_size=len(predicted), sync_dist=True)
         self.log(f"{split}/mae", mae, on_step=False, on_epoch=True, sync_dist=True)
         return loss
+
+
+def sgd_with_step_decay(task: BaseTask) -> dict | torch.optim.Optimizer:
+    """SGD with momentum and weight decay, the lr multiplied by lr_gamma every lr_step_epochs (0: fixed)."""
+    hp = task.hparams
+    optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
+    if hp.lr_step_epochs <= 0:
+        return optimizer
+    scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
+    return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}

@@ -9,14 +9,10 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import lightning as L
 import numpy as np
 import torch
-
-if TYPE_CHECKING:
-    from offroad_path.training.run import RunSpec
 
 log = logging.getLogger("offroad_path.training")
 BEST = "best"  # the registered model's alias for its version with the best validation score
@@ -45,23 +41,33 @@ def _mark_best(client, name: str, monitor: str, mode: str) -> None:
     client.set_registered_model_tag(name, "selected_by", f"{mode} {monitor}")
 
 
-def publish(run_id: str, tracking_uri: str, task: L.LightningModule, spec: RunSpec, score: float | None) -> None:
-    """Log task.model into the run `run_id` with its signature (spec.input_size) and spec.manifests as
-    its inputs; with spec.register_as, register it (a new version of registered_name(...)) and move BEST."""
+def publish(  # noqa: PLR0913
+    run_id: str,
+    tracking_uri: str,
+    task: L.LightningModule,
+    *,
+    input_size: tuple[int, int],
+    manifests: dict[str, Path],
+    register_as: str | None,
+    score: float | None,
+) -> None:
+    """Log task.model into the run `run_id` with its signature (input_size: the network's (height,
+    width)) and `manifests` (by MLflow context) as its inputs; with register_as, an architecture,
+    register it (a new version of registered_name(register_as)) and move BEST."""
     import mlflow
     import mlflow.pytorch
     from mlflow.models import infer_signature
     from mlflow.tracking import MlflowClient
 
     network = task.model.eval()
-    input_size, architecture = spec.input_size, spec.register_as
+    architecture = register_as
     example = torch.zeros(1, 3, *input_size)  # (1, 3, H, W), an image as the network takes it
     with torch.no_grad():
         output = network(example)
     signature = infer_signature(example.numpy(), output.numpy())
     mlflow.set_tracking_uri(tracking_uri)
     with mlflow.start_run(run_id=run_id):
-        for context, dataset in _datasets(spec.manifests):
+        for context, dataset in _datasets(manifests):
             mlflow.log_input(dataset, context=context)
         logged = mlflow.pytorch.log_model(
             network,

@@ -42,7 +42,7 @@ from offroad_path.training.published import publish
 from offroad_path.training.task import BaseTask, SegmentationTask
 from offroad_path.utils.atomic import MARKER, atomic_directory, owned
 from offroad_path.utils.ranks import is_global_zero
-from offroad_path.utils.tracking import experiment_id, flatten, multirun_parent, pipeline_parent, tracking_uri
+from offroad_path.utils.tracking import OPEN_RUNS, experiment_id, flatten, multirun_parent, pipeline_parent, tracking_uri
 from offroad_path.world.classes import CLASS_NAMES
 
 log = logging.getLogger(__name__)
@@ -70,6 +70,8 @@ def training_logger(cfg: DictConfig, run_name: str, tags: dict, params: dict) ->
     else:  # a logger that writes folders (CSVLogger, TensorBoardLogger): one per stage and run
         logger = instantiate(cfg.logger, name=run_name.replace(" ", "/"))
     logger.log_hyperparams(flatten(params))
+    if isinstance(logger, MLFlowLogger):
+        OPEN_RUNS[logger.run_id] = tracking_uri(cfg.mlflow)  # ended KILLED on a stop; Lightning ends it otherwise
     return logger
 
 
@@ -230,7 +232,9 @@ def fit(
         logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
         logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
         if cfg.mlflow.log_models and spec.input_size[0]:
-            publish(logger.run_id, tracking_uri(cfg.mlflow), task, spec, best_score)
+            publish(logger.run_id, tracking_uri(cfg.mlflow), task, input_size=spec.input_size, manifests=spec.manifests,
+                    register_as=spec.register_as, score=best_score)  # fmt: skip
+        OPEN_RUNS.pop(logger.run_id, None)  # whole: a stop from here on is no longer this run's
     return metrics
 
 

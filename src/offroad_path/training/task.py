@@ -14,6 +14,7 @@ from torchmetrics import Metric, MetricCollection
 from torchmetrics.classification import MulticlassAccuracy, MulticlassJaccardIndex
 from torchmetrics.functional.classification import binary_stat_scores
 
+from offroad_path.errors import InputError
 from offroad_path.models import build_model
 from offroad_path.statistics.scores import SCORES
 
@@ -41,10 +42,11 @@ class PathScore(Metric):
 class BaseTask(L.LightningModule):
     """What every task of this project shares (torchgeo's pattern): subclasses build their network,
     loss and metrics in the configure_* hooks, name the validation metric that early stopping and
-    the best checkpoint follow, and write one `_step`; all train with the paper's SGD."""
+    the best checkpoint follow, write one `_step` and own their optimiser (configure_optimizers)."""
 
     monitor: str
     mode: str  # "max" or "min"
+    loss_settings: str  # the settings a non-finite training loss points to, named in its error
 
     def __init__(self) -> None:
         """Saves the subclass's __init__ arguments as the checkpoint's hyper-parameters (Lightning reads
@@ -70,7 +72,14 @@ class BaseTask(L.LightningModule):
         raise NotImplementedError
 
     def training_step(self, batch: dict, batch_idx: int) -> torch.Tensor:
-        return self._step(batch, "train")
+        """One step's loss; stops the run at the first non-finite one (a diverged run trains nothing
+        worth keeping), naming the settings of its loss terms and rate."""
+        loss = self._step(batch, "train")
+        if not torch.isfinite(loss):
+            raise InputError(
+                self.loss_settings, f"the training loss is {loss.item()} at step {self.global_step}: the run diverged; lower or check them"
+            )
+        return loss
 
     def validation_step(self, batch: dict, batch_idx: int) -> None:
         self._step(batch, "val")
@@ -79,11 +88,12 @@ class BaseTask(L.LightningModule):
         self._step(batch, "test")
 
     def configure_optimizers(self):
-        return sgd_with_step_decay(self)  # PilotNet (the thesis's schedule, in epochs)
+        raise NotImplementedError  # each task owns its optimiser and schedule
 
 
 class SegmentationTask(BaseTask):
     monitor, mode = "val/iou", "max"
+    loss_settings = "model.dice_weight, model.lr, model.weight_decay"
 
     # Each argument is a hyper-parameter saved flat in the checkpoint, which TorchModel rebuilds
     # the task from; conf/model/<name>.yaml builds one through segmentation_task (its `_target_`).
@@ -212,13 +222,3 @@ def optimizer_with_schedule(
 
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
     return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "step"}}
-
-
-def sgd_with_step_decay(task: L.LightningModule):
-    """SGD with momentum and weight decay, the lr multiplied by lr_gamma every lr_step_epochs (0: fixed)."""
-    hp = task.hparams
-    optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
-    if hp.lr_step_epochs <= 0:
-        return optimizer
-    scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
-    return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}

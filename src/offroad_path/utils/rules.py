@@ -8,6 +8,7 @@ import math
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+import numpy as np
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import MissingMandatoryValue
 
@@ -22,17 +23,32 @@ class Rule:
     says: str
 
 
+# Losses, weights and rates are computed in float32: a setting must be a number there too (1e39 is
+# finite in float64, infinite in float32; 1e-50 is above 0 in float64, 0 in float32).
+FLOAT32 = np.finfo(np.float32)
+
+
 def _number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and abs(v) <= FLOAT32.max
+
+
+def _float64_only(v: Any) -> bool:
+    """A number finite in float64 that float32, the precision it is used in, makes infinite or 0."""
+    return (
+        isinstance(v, int | float)
+        and not isinstance(v, bool)
+        and math.isfinite(v)
+        and (abs(v) > FLOAT32.max or 0 < abs(v) < FLOAT32.smallest_subnormal / 2)
+    )
 
 
 def rule(test: Callable[[float], bool], says: str) -> dict:
-    """A rule on a finite number (NaN and infinity never pass)."""
+    """A rule on a number finite in float32 (NaN and infinity never pass)."""
     return {"rule": Rule(lambda v: _number(v) and test(v), says)}
 
 
 def positive() -> dict:
-    return rule(lambda v: v > 0, "must be a number > 0")
+    return rule(lambda v: v > 0 and np.float32(v) > 0, "must be a number > 0")
 
 
 def at_least(low: float) -> dict:
@@ -105,6 +121,8 @@ def validate(cfg: DictConfig, schema: type, prefix: str = "", only: Iterable[str
         check = f.metadata.get("rule")
         if check is not None and value is not None and not check.test(value):
             says = check.says or f"must be one of: {', '.join(f.metadata['choices']())}"
+            if _float64_only(value):
+                says += " in float32, the precision it is used in"
             if check.says and "choices" in f.metadata:  # a list of choices with a rule of its own (distinct)
                 says += f"; valid: {', '.join(f.metadata['choices']())}"
             raise ConfigValueError(f"{key}={value!r}: {says}")

@@ -17,6 +17,8 @@ from offroad_path.utils.lifetime import dvc_ancestor
 # MLflow 3.17's UI opens experiments by its sidebar switch instead (?workflowType=machine_learning,
 # README "The dashboard"); the tag is what MLflow's APIs and UIs without that switch read.
 EXPERIMENT_KIND, MODEL_TRAINING = "mlflow.experimentKind", "custom_model_development"
+# The runs this process has open (run id -> tracking URI): what a stop (SIGTERM) ends KILLED.
+OPEN_RUNS: dict[str, str] = {}
 
 
 def tracking_uri(cfg: DictConfig) -> str:
@@ -67,9 +69,37 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
     experiment = experiment_id(cfg.mlflow)
     parent = pipeline_parent(cfg)
     with mlflow.start_run(experiment_id=experiment, run_name=stage, tags={"mlflow.parentRunId": parent} if parent else None) as run:
-        mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
-        mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
-        yield run
+        OPEN_RUNS[run.info.run_id] = tracking_uri(cfg.mlflow)
+        try:
+            mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
+            mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
+            yield run
+        finally:
+            OPEN_RUNS.pop(run.info.run_id, None)
+
+
+def end_open_runs_killed(timeout_s: float = 5.0) -> None:
+    """On a stop: every run this process has open ends KILLED, and so does the `dvc repro` parent
+    of each (the repro stopped with it). In a thread given timeout_s, from the signal handler: a store
+    the stop caught in the middle of a write must not keep the stopped process alive."""
+    if not OPEN_RUNS:
+        return
+    import threading
+
+    def end() -> None:
+        from mlflow.tracking import MlflowClient
+
+        for run_id, uri in list(OPEN_RUNS.items()):
+            client = MlflowClient(uri)
+            now = int(time.time() * 1000)
+            client.set_terminated(run_id, "KILLED", end_time=now)
+            parent = client.get_run(run_id).data.tags.get("mlflow.parentRunId")
+            if parent and client.get_run(parent).data.tags.get("stage") == "dvc repro":
+                client.set_terminated(parent, "KILLED", end_time=now)
+
+    stopping = threading.Thread(target=end, daemon=True)
+    stopping.start()
+    stopping.join(timeout_s)
 
 
 def multirun_parent(cfg: DictConfig) -> str | None:

@@ -24,7 +24,7 @@ import numpy as np
 from offroad_path.config.world import WorldConfig
 from offroad_path.geometry.exact import matmul, rigid_inverse
 from offroad_path.world.classes import DIRT, GRASS, PAVED, WATER
-from offroad_path.world.groups import OLD_LOOK
+from offroad_path.world.groups import SINGLE_LOOK
 from offroad_path.world.kernels import sample_bilinear
 from offroad_path.world.scene import World
 from offroad_path.world.trajectory import ARC_STEP_M
@@ -40,7 +40,7 @@ def frame_conditions(world: World, cfg: WorldConfig, distance_m: float = 20.0, n
     half = cfg.vehicle.width_m / 2
     tan_half_fov = np.tan(np.deg2rad(cfg.hfov_deg) / 2)
     fork_points = _fork_points(world)
-    look = OLD_LOOK if world.look is None else world.look.tags() | {"canopy": "tree_lined" if world.look.tree_lined else "open"}
+    look = SINGLE_LOOK if world.look is None else world.look.tags() | {"canopy": "tree_lined" if world.look.tree_lined else "open"}
     rows = []
     for k, s0 in enumerate(world.frame_s):
         s = s0 + np.arange(0.0, distance_m + 1e-9, 0.25)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-OLD_LOOK = {"track": "dirt", "light": "clear", "look": "seen", "canopy": "open"}  # a world rendered without world.appearance
+SINGLE_LOOK = {"track": "dirt", "light": "clear", "look": "seen", "canopy": "open"}  # a world rendered without world.appearance
 SHADOW_FRACTION = 0.1  # of the corridor, for "shadow on the path"
 # The report's condition groups, (key, title, test on one frame's row): a frame may be in several.
 GROUPS: list[tuple[str, str, Callable[[dict], bool]]] = [

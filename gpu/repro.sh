@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# The GPU preset's whole pipeline from nothing, in one go, on a GPU host without network
+# (docs/scaling.md): the project's packages from an offline wheelhouse, `dvc repro gpu/dvc.yaml`
+# with MLflow off, each stage timed into gpu/metrics/pipeline_time.json and the GPU's utilisation
+# sampled every second into gpu/metrics/gpu_utilisation.csv.
+#
+#   bash ../shared/gpu-host/wheelhouse.sh .whl --dvc     # where a package registry answers
+#   bash gpu/repro.sh [--wheelhouse .whl] [--pipeline gpu/dvc.yaml]
+#
+# --wheelhouse none uses the Python environment as it is (a host with every package installed).
+# --pipeline tour/dvc.yaml rehearses the same steps on the tour's tiny worlds, on any CPU.
+# It refuses to start over outputs already there (the pipeline's data/, metrics/ or lock):
+# it never deletes a run; move or remove it yourself.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+WHEELHOUSE=.whl
+PIPELINE=gpu/dvc.yaml
+while [ $# -gt 0 ]; do
+  case $1 in
+    --wheelhouse) WHEELHOUSE=$2; shift 2 ;;
+    --pipeline) PIPELINE=$2; shift 2 ;;
+    *) echo "error: $1: unknown argument (--wheelhouse DIR, --pipeline FILE)" >&2; exit 2 ;;
+  esac
+done
+ROOT=$(dirname "$PIPELINE")
+[ -f "$PIPELINE" ] || { echo "error: $PIPELINE: no such pipeline" >&2; exit 2; }
+for made in "$ROOT/data" "$ROOT/metrics" "$ROOT/dvc.lock"; do
+  if [ -e "$made" ]; then echo "error: $made: exists; a run from nothing starts without it (move it away)" >&2; exit 2; fi
+done
+if [ "$WHEELHOUSE" != none ]; then
+  ls "$WHEELHOUSE"/*.whl >/dev/null 2>&1 || { echo "error: $WHEELHOUSE: holds no wheels (build them with wheelhouse.sh)" >&2; exit 2; }
+  python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site "$WHEELHOUSE"/*.whl
+  export PYTHONPATH=/tmp/site:$PWD/src PATH=/tmp/site/bin:$PATH  # /tmp/site first: its versions win
+fi
+export OFFROAD_MLFLOW=false  # the presets read it (mlflow.enabled): no tracking store on the host
+if [ ! -d .git ]; then  # DVC needs a repository: a copy of the working tree has none
+  git init -q && git add -A >/dev/null && git -c user.name=repro -c user.email=repro@localhost commit -qm "the run's tree"
+fi
+mkdir -p "$ROOT/metrics"
+SAMPLER=""
+if command -v nvidia-smi >/dev/null; then
+  nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv,noheader,nounits -l 1 >"$ROOT/metrics/gpu_utilisation.csv" &
+  SAMPLER=$!
+fi
+status=0
+python3 benchmarks/pipeline_time.py --log "$ROOT/pipeline_time.log" --json "$ROOT/metrics/pipeline_time.json" -- "$PIPELINE" || status=$?
+[ -n "$SAMPLER" ] && kill "$SAMPLER"
+exit "$status"
