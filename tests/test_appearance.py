@@ -171,7 +171,13 @@ def test_stress_sets_section_by_hand(tmp_path):
     net = row["unet-none"]
     assert net["iou"] == pytest.approx(6 / 20) and net["minus_prior"] == pytest.approx(6 / 20 - 1 / 3, abs=1e-6)
     assert net["low"] <= net["minus_prior"] <= net["high"]
-    assert "| a look no training drive shows (world.appearance.held_out) | 2 | 2 | 0.333 |" in section.markdown()
+    # two worlds: an example, its IoU without a margin or interval; from four worlds on, with them
+    assert "| a look no training drive shows (world.appearance.held_out) | 2 | 2 | 0.333 | 0.300 |" in section.markdown()
+    from offroad_path.evaluation.stress import markdown
+    from offroad_path.statistics.bootstrap import Interval
+
+    margin = Interval(net["minus_prior"], net["low"], net["high"]).difference_text()
+    assert f"| 0.333 | 0.300, {margin} |" in markdown({"held_out_look": row | {"worlds": 4}})
 
 
 def test_the_renderers_tables_give_every_look_name_its_colours_in_drawing_order():

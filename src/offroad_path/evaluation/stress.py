@@ -74,11 +74,13 @@ class StressSets:
         return {"stress_sets": {name: entry(row) for name, row in self.rows.items()}} if self.rows else {}
 
 
+MIN_WORLDS = 4  # a set scored on fewer worlds (those whose test frames show its case) is an example: no interval
 INTRO = (
     "Each hard case is a set of test worlds drawn to show it, scored on its frames that show it and never pooled into "
     "the main test set's figures: the mean-path prior's IoU, then each network's IoU (raw maps, its seeds pooled) and its "
     "margin over the prior with a 95 % paired interval from the hierarchical bootstrap of the set's own worlds, blocks and "
-    "seeds (few worlds: wide intervals). An interval that holds 0: no difference measured."
+    "seeds (few worlds: wide intervals). An interval that holds 0: no difference measured. A set whose case shows in fewer "
+    f"than {MIN_WORLDS} of its worlds' test frames is an example: its IoUs alone, without a margin or interval."
 )
 
 
@@ -93,7 +95,7 @@ def markdown(found: dict, heading: str = "\n## Stress sets\n\n") -> str:
         "|" + " --- |" * (4 + len(runs)),
     ]
     for name, row in found.items():
-        cells = [_cell(row[r]) for r in runs]
+        cells = [_cell(row[r]) if row["worlds"] >= MIN_WORLDS else f"{row[r]['iou']:.3f}" for r in runs]
         lines.append(f"| {title(name)} | {row['worlds']} | {row['frames']} | {row['mean_path_prior']:.3f} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
