@@ -77,10 +77,12 @@ def test_the_sequence_checker_refuses_the_jump_the_label_stage_refuses(drive, tm
     for speed in ("inf", "nan"):
         with pytest.raises(SystemExit) as stopped:
             check_sequences([str(copy), "--max-speed-mps", speed])
-        assert stopped.value.code == 2
+        assert stopped.value.code == 2 and "--max-speed-mps: must be a finite speed above 0 m/s" in capsys.readouterr().err
     with pytest.raises(SystemExit) as stopped:
         check_sequences([str(copy), "--max-speed-mps", "20"])
-    assert stopped.value.code == 2 and "more than 20 m at --max-speed-mps" in capsys.readouterr().err
+    assert stopped.value.code == 2 and re.search(
+        r"row 8 is 1e\+03 m from row 7, more than \S+ m at --max-speed-mps$", capsys.readouterr().err.strip()
+    )
 
 
 def test_poses_scaled_past_any_number_are_refused(tmp_path):

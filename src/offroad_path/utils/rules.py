@@ -38,7 +38,7 @@ def _float64_only(v: Any) -> bool:
         isinstance(v, int | float)
         and not isinstance(v, bool)
         and math.isfinite(v)
-        and (abs(v) > FLOAT32.max or 0 < abs(v) < FLOAT32.smallest_subnormal / 2)
+        and (abs(v) > FLOAT32.max or 0 < abs(v) < float(FLOAT32.smallest_subnormal) / 2)
     )
 
 
