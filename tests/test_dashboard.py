@@ -35,14 +35,20 @@ STAGE = (
 )
 
 
-def test_the_stages_of_one_dvc_repro_share_one_parent_run(tmp_path):
-    repo, db = tmp_path / "repo", tmp_path / "mlflow.db"
+def dvc_pipeline(tmp_path: Path, stages: dict) -> Path:
+    """A git + DVC repository under tmp_path whose dvc.yaml holds `stages`."""
+    repo = tmp_path / "repo"
     repo.mkdir()
     git(repo, "init", "-q")
     subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
-    command = f'{sys.executable} -c "{STAGE.format(db=db)}"'
-    stages = {name: {"cmd": f"{command} {name}.json", "outs": [f"{name}.json"]} for name in ("first", "second")}
     (repo / "dvc.yaml").write_text(json.dumps({"stages": stages}))
+    return repo
+
+
+def test_the_stages_of_one_dvc_repro_share_one_parent_run(tmp_path):
+    db = tmp_path / "mlflow.db"
+    command = f'{sys.executable} -c "{STAGE.format(db=db)}"'
+    repo = dvc_pipeline(tmp_path, {name: {"cmd": f"{command} {name}.json", "outs": [f"{name}.json"]} for name in ("first", "second")})
     subprocess.run([sys.executable, "-m", "dvc", "repro", "-q"], cwd=repo, check=True, capture_output=True)
     first, second = (json.loads((repo / f"{name}.json").read_text()) for name in ("first", "second"))
     assert first["parent"] and (first["parent"], first["repro"]) == (second["parent"], second["repro"])  # found by the second stage
@@ -61,14 +67,10 @@ def test_the_stages_of_one_dvc_repro_share_one_parent_run(tmp_path):
 @pytest.mark.slow(seconds=30)
 def test_a_stage_refused_before_any_work_ends_the_repros_parent_failed(tmp_path):
     """Once the refusal came before the code that ends the parent: the repro failed, its parent FINISHED."""
-    repo, db = tmp_path / "repo", tmp_path / "mlflow.db"
-    repo.mkdir()
-    git(repo, "init", "-q")
-    subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
+    db = tmp_path / "mlflow.db"
     refused = f"{sys.executable} -m offroad_path.split split.block_m=-4 mlflow.tracking_uri=sqlite:///{db}"
-    stages = {"first": {"cmd": f'{sys.executable} -c "{STAGE.format(db=db)}" first.json', "outs": ["first.json"]},
-              "second": {"cmd": refused, "deps": ["first.json"], "outs": ["second"]}}  # fmt: skip
-    (repo / "dvc.yaml").write_text(json.dumps({"stages": stages}))
+    repo = dvc_pipeline(tmp_path, {"first": {"cmd": f'{sys.executable} -c "{STAGE.format(db=db)}" first.json', "outs": ["first.json"]},
+                                   "second": {"cmd": refused, "deps": ["first.json"], "outs": ["second"]}})  # fmt: skip
     repro = subprocess.run([sys.executable, "-m", "dvc", "repro", "-q"], cwd=repo, capture_output=True, text=True)
     assert repro.returncode != 0 and "split.block_m=-4" in repro.stdout + repro.stderr
     parent = json.loads((repo / "first.json").read_text())["parent"]
