@@ -200,7 +200,7 @@ def real_row(method: str, predicted: np.ndarray, frames: RealFrames, resampling:
     ]
     bounds = [(float("nan"), float("nan"))] * 3
     if resampling is not None:
-        bounds[0] = _bounds(confusion, blocks, iou, resampling)
+        bounds[0] = _bounds(confusion, blocks, iou, resampling, low=0.0)
         if kept.any():
             bounds[1] = _bounds(np.stack([gain[:, kept], np.ones_like(gain[:, kept])], -1), _pick(blocks, kept), mean, resampling)
         if ends.any():
@@ -212,13 +212,14 @@ def _pick(blocks: list, keep: np.ndarray) -> list:
     return [b for b, k in zip(blocks, keep, strict=True) if k]
 
 
-def _bounds(per_item: np.ndarray, blocks: list, score, resampling: Resampling) -> tuple[float, float]:
-    """The 95 % interval of `score` over the blocks (each its own unit: one recording) and the seeds."""
+def _bounds(per_item: np.ndarray, blocks: list, score, resampling: Resampling, low: float = -1.0) -> tuple[float, float]:
+    """The 95 % interval of `score` over the blocks (each its own unit: one recording) and the seeds,
+    within the score's range [low, 1] (widened for few blocks, it may reach past it: statistics.bootstrap)."""
     if len(set(blocks)) < 2:
         return float("nan"), float("nan")
     sums = block_sums(per_item, blocks)
     found = score_draws(sums if len(sums) > 1 else sums[0], score, resampling).interval()
-    return found.low, found.high
+    return max(found.low, low), min(found.high, 1.0)
 
 
 def leave_one_out_labels(frames: RealFrames) -> np.ndarray:
