@@ -174,7 +174,10 @@ class Draws:
         if self.worlds < 2:
             share = min(np.mean(values <= 0.0), np.mean(values >= 0.0))
             return float(min(1.0, max(2.0 * share, least)))
-        excludes = lambda alpha: not self.interval(1.0 - alpha).contains_zero  # noqa: E731 - wider as alpha falls
+
+        def excludes(alpha: float) -> bool:  # the interval at 1 - alpha: wider as alpha falls
+            return not self.interval(1.0 - alpha).contains_zero
+
         if excludes(least):
             return least
         if not excludes(1.0 - 1e-9):
