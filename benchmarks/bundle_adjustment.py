@@ -23,8 +23,8 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
 from offroad_path.config import load_config
-from offroad_path.config.labelling import OdometryConfig
-from offroad_path.odometry.trajectory import drift, run_odometry
+from offroad_path.config.label_schema import OdometryConfig
+from offroad_path.odometry.sequence_trajectory import drift, run_odometry
 from offroad_path.odometry.windowed import WindowedOdometry
 from offroad_path.sequence import open_sequence
 
@@ -128,7 +128,7 @@ def main() -> None:
     parser.add_argument("--sequences", nargs="+", default=default)
     args = parser.parse_args()
     cv2.setNumThreads(1)
-    import offroad_path.odometry.trajectory as trajectory
+    import offroad_path.odometry.sequence_trajectory as trajectory
 
     cfg = OdometryConfig(**load_config().label.odometry)
     for path in args.sequences:

@@ -137,7 +137,7 @@ def test_counts(run_dir: Path, yardstick: dict[str, str] | None, threshold: floa
 
     from offroad_path.data.loading import load_labels, load_maps
     from offroad_path.data.manifest import read_predictions_manifest
-    from offroad_path.evaluation.metrics import counts
+    from offroad_path.evaluate.pixel_scores import counts
 
     rows = read_predictions_manifest(run_dir / "predictions" / "manifest.csv", "train")
     if yardstick is not None:

@@ -28,9 +28,9 @@ import cv2
 import numpy as np
 
 from offroad_path.config import load_config
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.odometry.features import FrontEnd
-from offroad_path.odometry.trajectory import drift, run_odometry
+from offroad_path.odometry.sequence_trajectory import drift, run_odometry
 from offroad_path.sequence import find_sequences, open_sequence
 from offroad_path.sequence.misaligned import misaligned
 from offroad_path.utils.parallel import map_processes

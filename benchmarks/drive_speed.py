@@ -4,7 +4,7 @@ judge), per kind of policy, on one core, in one held-out test world of the commi
     python benchmarks/drive_speed.py [--policies unet-segmentation unet-segmentation+temporal pilotnet oracle]
                                      [--metres 40] [--set drive.width=512 drive.height=288]
 
-Runs the drive stage's own code (offroad_path.driving) with its config (conf/drive, any `--set`
+Runs the drive stage's own code (offroad_path.drive) with its config (conf/drive, any `--set`
 overrides) on data/synthetic's first test world, with the checkpoints the pipeline trained
 (data/runs, data/steering), and prints milliseconds per step and steps per second for each policy.
 """
@@ -19,11 +19,11 @@ import cv2
 import torch
 
 from offroad_path.config import load_config
-from offroad_path.driving.course import Course
-from offroad_path.driving.loop import LoopSettings, Setup, drive
-from offroad_path.driving.policies import StereoRig
-from offroad_path.driving.vehicle import Vehicle
-from offroad_path.driving.worlds import drive_params, make_policy, test_worlds
+from offroad_path.drive.course import Course
+from offroad_path.drive.loop import LoopSettings, Setup, drive
+from offroad_path.drive.policies import StereoRig
+from offroad_path.drive.vehicle import Vehicle
+from offroad_path.drive.worlds import drive_params, make_policy, test_worlds
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.world.record import rebuild_world
 from offroad_path.world.render import PinholeCamera

@@ -17,7 +17,7 @@ steps whatever the number of frames, and keeps its last weights (no validation s
 
 Columns: IoU against each test frame's own label and against the other test frames' labels (the
 shuffled control: a network that paints one path for every image scores the same on both), the
-label-centred gain and the far-end correlation (evaluation/real.py), and world minus random
+label-centred gain and the far-end correlation (evaluate/real.py), and world minus random
 weights paired on the same draws; the control row fine-tunes on all frames with their labels
 shuffled among the frames. Intervals: 95 % bootstrap over the test stretch's 10 m blocks and the
 three seeds. Writes docs/images/few_shot.png with --figure.
@@ -44,7 +44,7 @@ BLOCK_M = 10.0  # the bootstrap's blocks of driving inside it
 def pools(recording: Path, other: Path, work: Path, guard_m: float):
     """Label both drives; (test frames, training samples) of kitti00_mono's held-out stretch and the rest."""
     from offroad_path.config import load_config
-    from offroad_path.evaluation.real import RealFrames
+    from offroad_path.evaluate.real import RealFrames
     from offroad_path.split import labelled_frames
 
     cfg = load_config()
@@ -128,8 +128,8 @@ def predict(checkpoints: list[Path], images: list[np.ndarray]) -> np.ndarray:
 
 def curve(args) -> dict:
     from offroad_path.config import load_config
-    from offroad_path.evaluation.metrics import counts
-    from offroad_path.evaluation.real import real_row
+    from offroad_path.evaluate.pixel_scores import counts
+    from offroad_path.evaluate.real import real_row
     from offroad_path.statistics.bootstrap import Resampling, block_sums, paired_interval
     from offroad_path.statistics.scores import iou
 

@@ -53,7 +53,7 @@ def main() -> None:
         ros1 = write_bag(root / "drive.bag", "ros1", frames, rig, compressed=(True, True))
         left, right = write_videos(root, frames, fps=5.0, right_offset=3)
         calibration = root / "stereo.yaml"
-        from offroad_path.recordings.calibration import CameraModel, StereoRig, write_opencv
+        from offroad_path.recordings.rig_calibration import CameraModel, StereoRig, write_opencv
 
         write_opencv(
             calibration, StereoRig(*[CameraModel(K, D, rig.size) for K, D in zip(rig.K, rig.D, strict=True)], rig.R, rig.T, calibration)

@@ -1,5 +1,5 @@
 """The README's "Check your labels" figures from the committed pipeline's labels: runs
-`python -m offroad_path.labelling.inspect data/labels --recording data/synthetic`, copies the summary
+`python -m offroad_path.label.inspect data/labels --recording data/synthetic`, copies the summary
 page, and draws one sequence's .rrd, read back with rerun.chunk.RrdReader, as a still (no browser
 runs here to screenshot the viewer): the image with its label at one labelled frame, and the scene
 from above (trajectories, that label's footprints, that frame's point cloud). Prints the time taken.
@@ -18,7 +18,7 @@ import cv2
 import matplotlib
 import numpy as np
 
-from offroad_path.labelling.inspect import main as inspect
+from offroad_path.label.inspect import main as inspect
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt

@@ -35,10 +35,10 @@ from common import key, test_counts
 
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import read_manifest
-from offroad_path.evaluation.metrics import counts, pooled
-from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
+from offroad_path.evaluate.pixel_scores import counts, pooled
+from offroad_path.evaluate.uncertainty import HierarchicalBootstrap, sample_blocks
 from offroad_path.odometry.perturb import PoseError, drifted_poses, erroneous_poses
-from offroad_path.odometry.trajectory import drift
+from offroad_path.odometry.sequence_trajectory import drift
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.statistics.bootstrap import Resampling

@@ -85,7 +85,7 @@ def test_counts(manifest: Path, test: list, labels: np.ndarray) -> np.ndarray:
     mirroring among the run's, which may hold more) at the default threshold."""
     from offroad_path.data.loading import load_maps
     from offroad_path.data.manifest import read_predictions_manifest
-    from offroad_path.evaluation.metrics import counts
+    from offroad_path.evaluate.pixel_scores import counts
 
     maps = {(s.sequence, s.f0, s.mirrored): path for s, path in read_predictions_manifest(manifest, "train")}
     return counts(load_maps([maps[s.sequence, s.f0, s.mirrored] for s in test]), labels, 0.5)
@@ -94,8 +94,8 @@ def test_counts(manifest: Path, test: list, labels: np.ndarray) -> np.ndarray:
 def curve(args: argparse.Namespace) -> dict:
     from offroad_path.config import load_config
     from offroad_path.data.loading import load_labels
-    from offroad_path.evaluation.metrics import counts, mean_path, pooled
-    from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
+    from offroad_path.evaluate.pixel_scores import counts, mean_path, pooled
+    from offroad_path.evaluate.uncertainty import HierarchicalBootstrap, sample_blocks
     from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.statistics.scores import iou
 

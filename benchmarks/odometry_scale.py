@@ -18,9 +18,9 @@ import cv2
 import numpy as np
 
 from offroad_path.config import load_config
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.odometry.features import FrontEnd
-from offroad_path.odometry.trajectory import drift, run_odometry
+from offroad_path.odometry.sequence_trajectory import drift, run_odometry
 from offroad_path.sequence import open_sequence
 
 ROOT = Path(__file__).resolve().parents[1]

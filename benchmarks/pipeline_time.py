@@ -13,7 +13,7 @@ job would. `--parse` prints the table of a log written before. With the run's ML
 start-up (the process's imports, Hydra, data set-up and MLflow's store, until its run starts), the
 run itself, and its end (the run's end to the next stage's start: process exit, DVC hashing and
 caching its outputs). `--json` writes the machine, `total_s` and each stage's seconds, which the
-generated results (offroad_path.evaluation.readme) state as the committed run's time. Each
+generated results (offroad_path.report.readme) state as the committed run's time. Each
 stage's peak resident memory is the largest high-water mark (VmHWM) of any
 process under `dvc repro` while the stage runs, read from /proc every 0.2 s (a rise in a process's
 last 0.2 s can be missed); it is written into the log as `#peak` lines.

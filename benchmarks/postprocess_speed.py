@@ -25,7 +25,7 @@ import numpy as np
 from offroad_path.config import load_config
 from offroad_path.data.loading import load_depth, load_labels
 from offroad_path.data.manifest import read_predictions_manifest
-from offroad_path.postprocessing import PostprocessParams, postprocess
+from offroad_path.inference.path_filter import PostprocessParams, postprocess
 
 ROOT = Path(os.environ.get("OFFROAD_ROOT", Path(__file__).resolve().parents[1]))  # a checkout that ran `dvc repro`
 

@@ -22,8 +22,8 @@ import matplotlib
 import numpy as np
 
 from offroad_path.config import load_config
-from offroad_path.inference.ros_out import typestore
 from offroad_path.predict import run_predict
+from offroad_path.predict.ros_out import typestore
 from offroad_path.sequence.reader import open_sequence
 
 matplotlib.use("Agg")

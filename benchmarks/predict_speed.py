@@ -19,7 +19,7 @@ import numpy as np
 import onnxruntime as ort
 import torch
 
-from offroad_path.inference.export import PathConfidence, export_onnx
+from offroad_path.export.onnx_export import PathConfidence, export_onnx
 from offroad_path.inference.runners import PathModel
 from offroad_path.models import MODELS, build_model
 

@@ -113,7 +113,7 @@ def development_counts(manifest: Path, development: list, labels: np.ndarray) ->
     """(N, 4) per-image [tp, fp, tn, fn] of a run's maps of the development samples."""
     from offroad_path.data.loading import load_maps
     from offroad_path.data.manifest import read_predictions_manifest
-    from offroad_path.evaluation.metrics import counts
+    from offroad_path.evaluate.pixel_scores import counts
 
     maps = {(s.sequence, s.f0, s.mirrored): path for s, path in read_predictions_manifest(manifest, "train")}
     return counts(load_maps([maps[s.sequence, s.f0, s.mirrored] for s in development]), labels, 0.5)
@@ -122,8 +122,8 @@ def development_counts(manifest: Path, development: list, labels: np.ndarray) ->
 def search(args: argparse.Namespace) -> dict:
     from offroad_path.config import load_config
     from offroad_path.data.loading import load_labels
-    from offroad_path.evaluation.metrics import counts, mean_path, pooled
-    from offroad_path.evaluation.uncertainty import HierarchicalBootstrap, sample_blocks
+    from offroad_path.evaluate.pixel_scores import counts, mean_path, pooled
+    from offroad_path.evaluate.uncertainty import HierarchicalBootstrap, sample_blocks
     from offroad_path.models import BATCH_NORM_CHOICE
     from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.statistics.scores import iou

@@ -49,7 +49,7 @@ from common import PER_SEED, compare, iou, key, mae, merge, test_counts
 
 from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import read_manifest
-from offroad_path.evaluation.metrics import counts, mean_path
+from offroad_path.evaluate.pixel_scores import counts, mean_path
 
 
 def yardstick_labels(root: Path | None) -> dict[str, str] | None:

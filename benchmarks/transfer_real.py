@@ -5,7 +5,7 @@ true poses), beside what needs no perception.
     python benchmarks/transfer_real.py [--recording ../shared/data/kitti00_mono] [--json out.json]
 
 Run after `dvc repro` (it reads data/runs/<run>/seed<k>/checkpoints/best.ckpt and data/split/train.csv).
-The recording has one camera: the label stage labels it from its poses.txt, without occlusion. Rows (evaluation/real.py): IoU against
+The recording has one camera: the label stage labels it from its poses.txt, without occlusion. Rows (evaluate/real.py): IoU against
 each frame's own label; against the other frames' labels; the label-centred gain over the frames that
 bend the other way (0 for any constant prediction); the correlation of the predicted path's far end
 with the label's. Baselines: the mean path of the synthetic training labels, the other frames' mean
@@ -32,8 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def colour_row(frames, resampling):
     """The colour classifier fitted on the synthetic training split, run on the real frames."""
     from offroad_path.data.manifest import read_manifest
-    from offroad_path.evaluation.colour import ColourBaseline, pixel_features
-    from offroad_path.evaluation.real import real_row
+    from offroad_path.evaluate.colour import ColourBaseline, pixel_features
+    from offroad_path.evaluate.real import real_row
 
     model = ColourBaseline(400, 0).fit(read_manifest(str(ROOT / "data/split/train.csv")))
     h, w = frames.labels.shape[1:]
@@ -57,8 +57,8 @@ def main() -> None:
     from offroad_path.config import load_config
     from offroad_path.data.loading import load_labels
     from offroad_path.data.manifest import read_manifest
-    from offroad_path.evaluation.metrics import mean_path
-    from offroad_path.evaluation.real import RealFrames, score_real
+    from offroad_path.evaluate.pixel_scores import mean_path
+    from offroad_path.evaluate.real import RealFrames, score_real
     from offroad_path.statistics.bootstrap import Resampling
 
     cfg = load_config()

@@ -143,9 +143,9 @@ def test_stress_sets_section_by_hand(tmp_path):
     """Two main worlds and two stress worlds (held-out looks), one frame each, one run with two seeds: the
     section scores only the stress frames, each against the prior, counted by hand."""
     from offroad_path.data.manifest import Sample
-    from offroad_path.evaluation.report import TestSet
-    from offroad_path.evaluation.stress import StressSets
-    from offroad_path.evaluation.uncertainty import HierarchicalBootstrap
+    from offroad_path.evaluate.scored_set import TestSet
+    from offroad_path.evaluate.stress import StressSets
+    from offroad_path.evaluate.uncertainty import HierarchicalBootstrap
     from offroad_path.statistics.bootstrap import Resampling
     from offroad_path.world.conditions import COLUMNS
 
@@ -173,11 +173,11 @@ def test_stress_sets_section_by_hand(tmp_path):
     assert net["low"] <= net["minus_prior"] <= net["high"]
     # two worlds: an example, its IoU without a margin or interval; from four worlds on, with them
     assert "| a look no training drive shows (world.appearance.held_out) | 2 | 2 | 0.333 | 0.300 |" in section.markdown()
-    from offroad_path.evaluation.stress import markdown
+    from offroad_path.report.rendering import stress_markdown
     from offroad_path.statistics.bootstrap import Interval
 
     margin = Interval(net["minus_prior"], net["low"], net["high"]).difference_text()
-    assert f"| 0.333 | 0.300, {margin} |" in markdown({"held_out_look": row | {"worlds": 4}})
+    assert f"| 0.333 | 0.300, {margin} |" in stress_markdown({"held_out_look": row | {"worlds": 4}})
 
 
 def test_the_renderers_tables_give_every_look_name_its_colours_in_drawing_order():

@@ -21,7 +21,7 @@ from offroad_path.errors import InputError
 from offroad_path.ingest import ingest
 from offroad_path.predict import run_predict
 from offroad_path.recordings.bags import decode_image
-from offroad_path.recordings.calibration import read_rig
+from offroad_path.recordings.rig_calibration import read_rig
 
 LEFT, RIGHT = "/stereo/left/image_raw", "/stereo/right/image_raw"
 ROOT = Path(__file__).resolve().parents[1]

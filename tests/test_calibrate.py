@@ -12,8 +12,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from offroad_path.recordings.boards import Board
-from offroad_path.recordings.calibration import read_rig
 from offroad_path.recordings.rectify import Rectifier
+from offroad_path.recordings.rig_calibration import read_rig
 
 SIZE = (640, 480)
 K = (np.array([[520.0, 0, 322], [0, 518, 236], [0, 0, 1]]), np.array([[515.0, 0, 316], [0, 516, 243], [0, 0, 1]]))

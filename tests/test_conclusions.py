@@ -12,8 +12,8 @@ import torch
 from omegaconf import OmegaConf
 
 from offroad_path.errors import InputError
-from offroad_path.evaluation.readme import main
-from offroad_path.evaluation.rendering import PRIMARIES_HEAD, misstated, primaries_markdown
+from offroad_path.report.readme import main
+from offroad_path.report.rendering import PRIMARIES_HEAD, misstated, primaries_markdown
 from offroad_path.statistics.counts import compare_rates, power, route_needed
 from offroad_path.statistics.primaries import check_declared, holm_levels, verdicts
 
@@ -125,8 +125,8 @@ def test_a_curvature_pilotnet_steers_another_vehicle_by_its_own_wheelbase():
     normalised angle 0.5 steers every vehicle half its own lock."""
     from types import SimpleNamespace
 
-    from offroad_path.driving.policies import PilotNetPolicy
-    from offroad_path.steering.task import SteeringTask
+    from offroad_path.drive.policies import PilotNetPolicy
+    from offroad_path.steering.pilotnet_task import SteeringTask
 
     settings = {"width": 128, "height": 68, "lr": 0.01, "lr_step_epochs": 5, "lr_gamma": 0.5, "momentum": 0.9, "weight_decay": 0.0}
     task = SteeringTask(**settings, target="curvature", lock_deg=30.0, wheelbase_m=2.8)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from offroad_path.data.manifest import Sample
-from offroad_path.evaluation.conditions import by_condition, read_conditions
+from offroad_path.evaluate.by_condition import by_condition, read_conditions
 from offroad_path.world.classes import DIRT, GRASS, PAVED, WATER
 from offroad_path.world.conditions import STRAIGHT_RADIUS_M, frame_conditions
 from offroad_path.world.scene import World

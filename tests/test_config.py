@@ -111,10 +111,12 @@ def test_a_list_naming_a_value_twice_or_nothing_is_refused_before_any_work(overr
 def test_each_choice_list_is_the_one_its_implementation_uses():
     """config/ holds the names a setting may take; the module that implements them imports the list or
     keys a table by exactly those names, so the schema's check and the code cannot drift apart."""
-    from offroad_path.config import labelling, training, world
+    from offroad_path.config import label_schema as labelling
+    from offroad_path.config import training_schema as training
+    from offroad_path.config import world_schema as world
     from offroad_path.data import splitting
-    from offroad_path.labelling import frame_selection, labeller
-    from offroad_path.odometry.trajectory import ESTIMATORS
+    from offroad_path.label import frame_selection, labeller
+    from offroad_path.odometry.sequence_trajectory import ESTIMATORS
     from offroad_path.steering import balance
     from offroad_path.world.groups import GROUP_KEYS
 

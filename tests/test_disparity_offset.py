@@ -10,11 +10,11 @@ import cv2
 import numpy as np
 import pytest
 
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.label import offset_metrics
-from offroad_path.labelling.labeller import write_odometry
+from offroad_path.label.labeller import write_odometry
+from offroad_path.odometry.sequence_trajectory import OdometryRun, drift, run_odometry
 from offroad_path.odometry.steps import StepResult
-from offroad_path.odometry.trajectory import OdometryRun, drift, run_odometry
 from offroad_path.sequence import open_sequence
 from offroad_path.sequence.misaligned import misaligned
 from offroad_path.sequence.reader import Sequence

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.odometry.trajectory import drift
+from offroad_path.odometry.sequence_trajectory import drift
 
 
 def straight(n: int, step_m: float) -> np.ndarray:

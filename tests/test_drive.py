@@ -1,4 +1,4 @@
-"""Closed-loop driving (offroad_path.driving) on hand-made tracks, checked against geometry worked
+"""Closed-loop driving (offroad_path.drive) on hand-made tracks, checked against geometry worked
 out by hand: the oracle stays on, straight ahead leaves a circle where the circle says, a steady
 steering error drifts as the bicycle model says, an intervention puts the vehicle back on the line,
 an object ahead is hit where it stands."""
@@ -12,11 +12,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from offroad_path.driving.course import Course
-from offroad_path.driving.loop import LoopSettings, Setup, drive
-from offroad_path.driving.policies import OraclePolicy, Policy, StraightPolicy
-from offroad_path.driving.report import finding, score, versus_end_to_end
-from offroad_path.driving.vehicle import State, Vehicle, advance
+from offroad_path.drive.closed_loop import finding, score, versus_end_to_end
+from offroad_path.drive.course import Course
+from offroad_path.drive.loop import LoopSettings, Setup, drive
+from offroad_path.drive.policies import OraclePolicy, Policy, StraightPolicy
+from offroad_path.drive.vehicle import State, Vehicle, advance
 from offroad_path.statistics.bootstrap import Resampling
 from offroad_path.world.classes import DIRT, FOLIAGE, OBSTACLE, TREE, WATER
 from offroad_path.world.objects import Objects

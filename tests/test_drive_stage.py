@@ -16,7 +16,7 @@ import torch
 from helpers import refused
 
 from offroad_path.drive import run_drive
-from offroad_path.steering.task import SteeringTask
+from offroad_path.steering.pilotnet_task import SteeringTask
 
 SMALL_WORLD = ("world.frames=30", "world.width=128", "world.height=72")
 

@@ -18,8 +18,8 @@ from helpers import write_run
 from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import read_manifest, read_predictions_manifest
 from offroad_path.evaluate import evaluate
-from offroad_path.evaluation.metrics import counts, pooled
-from offroad_path.evaluation.uncertainty import sample_blocks
+from offroad_path.evaluate.pixel_scores import counts, pooled
+from offroad_path.evaluate.uncertainty import sample_blocks
 
 SHIFT_PX = 24
 
@@ -132,9 +132,9 @@ def test_the_central_claim_rests_on_the_weakest_network_against_the_prior(scored
 def test_a_stress_set_is_scored_on_its_own_and_kept_out_of_the_main_figures(compose_config, split_dir, tmp_path):
     """The test drive's meta.json made a stress world of the `all` group, beside the same drive as the main
     set: its frames leave every main figure and get a row of their own against the prior."""
-    from offroad_path.evaluation.report import TestSet
-    from offroad_path.evaluation.stress import StressSets
-    from offroad_path.evaluation.uncertainty import test_bootstrap
+    from offroad_path.evaluate.scored_set import TestSet
+    from offroad_path.evaluate.stress import StressSets
+    from offroad_path.evaluate.uncertainty import test_bootstrap
 
     samples = read_manifest(split_dir / "test.csv")
     labels = load_labels(samples).astype(np.float32)

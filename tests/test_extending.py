@@ -95,9 +95,6 @@ def hello(cfg: DictConfig) -> None:
 
 
 main = hydra_stage(hello)
-
-if __name__ == "__main__":
-    main()
 '''
 HELLO_SCHEMA = '''"""The stand-in stage's schema."""
 
@@ -119,7 +116,7 @@ class HelloConfig:
 
 
 def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc_deps(tmp_path):
-    """A stage: its module with @reads, its conf group, its schema and Config field, a defaults line and a dvc.yaml stage."""
+    """A stage: its package with @reads in __init__.py and a __main__.py, its conf group, its schema and Config field, a defaults line and a dvc.yaml stage."""
     import shutil
     import subprocess
     import sys
@@ -130,7 +127,9 @@ def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc
     for item in ("src", "conf", "tools", "dvc.yaml"):
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, tmp_path / item)
     package = tmp_path / "src" / "offroad_path"
-    (package / "hello.py").write_text(HELLO_STAGE)
+    (package / "hello").mkdir()
+    (package / "hello" / "__init__.py").write_text(HELLO_STAGE)
+    (package / "hello" / "__main__.py").write_text("from offroad_path.hello import main\n\nmain()\n")
     (package / "config" / "hello.py").write_text(HELLO_SCHEMA)
     init = (package / "config" / "__init__.py").read_text()
     schema = "\nfrom offroad_path.config.hello import HelloConfig\n\n\n@dataclass\nclass Config:\n"
@@ -141,7 +140,7 @@ def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc
     (tmp_path / "conf" / "hello" / "default.yaml").write_text("greeting: hello\ntimes: 2\nout_path: ${paths.data_dir}/hello.txt\n")
     primary = (tmp_path / "conf" / "config.yaml").read_text()
     (tmp_path / "conf" / "config.yaml").write_text(primary.replace("  - mlflow: default\n", "  - mlflow: default\n  - hello: default\n"))
-    stage = "  hello:\n    cmd: python -m offroad_path.hello\n    deps:\n      - src/offroad_path/hello.py\n"  # dvc_deps writes the rest
+    stage = "  hello:\n    cmd: python -m offroad_path.hello\n    deps:\n      - src/offroad_path/hello\n"  # dvc_deps writes the rest
     stage += "    outs:\n      - data/hello.txt\n"
     pipeline = (tmp_path / "dvc.yaml").read_text()
     (tmp_path / "dvc.yaml").write_text(pipeline.replace("\nplots:\n", f"\n{stage}\nplots:\n", 1))
@@ -159,4 +158,4 @@ def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc
     assert "'hello'" in listed.stdout, listed.stderr[-800:]
     assert run("tools/dvc_deps.py").returncode == 0
     deps = yaml.safe_load((tmp_path / "dvc.yaml").read_text())["stages"]["hello"]["deps"]
-    assert "src/offroad_path/hello.py" in deps and "src/offroad_path/stage.py" in deps
+    assert "src/offroad_path/hello" in deps and "src/offroad_path/stage.py" in deps

@@ -81,7 +81,7 @@ def test_set_threads_sets_torch_and_opencv():  # conftest's restore_threads puts
 
 
 def test_steering_frames_resized_once_give_the_same_tensors(compose_config, labelled_drive, split_dir):
-    from offroad_path.steering.dataset import SteeringDataModule
+    from offroad_path.steering.angle_dataset import SteeringDataModule
     from offroad_path.steering.frames import steering_split
 
     parts = steering_split(labelled_drive, split_dir, block_m=4, guard_m=3, mirror=True)

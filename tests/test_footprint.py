@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.labelling.footprint import Occlusion, VehicleFootprint, clip_near, footprint_depth, path_mask, project, swept_polygons
+from offroad_path.sequence.footprint import Occlusion, VehicleFootprint, clip_near, footprint_depth, path_mask, project, swept_polygons
 
 K = np.array([[100.0, 0.0, 50.0], [0.0, 100.0, 40.0], [0.0, 0.0, 1.0]])
 SIZE = (100, 80)

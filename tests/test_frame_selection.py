@@ -1,11 +1,11 @@
-"""Frame selection (labelling.frame_selection): which frames start a label segment, on hand-made trajectories."""
+"""Frame selection (label.frame_selection): which frames start a label segment, on hand-made trajectories."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from offroad_path.labelling.frame_selection import select_segments
+from offroad_path.label.frame_selection import select_segments
 
 
 def line(n: int, step: float, still: int = 0) -> np.ndarray:

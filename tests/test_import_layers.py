@@ -16,17 +16,16 @@ LAYERS = [  # lowest first; a unit is a subpackage or a top-level module of offr
     ["offroad_path", "errors", "utils"],
     ["config", "looks", "stage", "geometry", "statistics", "viz"],
     ["sequence"],
-    ["recordings", "world", "odometry", "data", "models", "postprocessing"],
-    ["labelling", "training"],
-    ["steering", "inference"],
-    ["evaluation", "driving"],
-    STAGES,
+    ["recordings", "world", "odometry", "data", "models"],
+    ["training"],
+    ["steering", "inference", "report"],
+    STAGES,  # each imports the libraries above, never another stage
 ]
 LAYER = {unit: k for k, units in enumerate(LAYERS) for unit in units}
 
 
 def unit(module: str) -> str:
-    """offroad_path.evaluation.bootstrap -> evaluation; offroad_path.label -> label; offroad_path -> offroad_path."""
+    """offroad_path.evaluate.bootstrap -> evaluation; offroad_path.label -> label; offroad_path -> offroad_path."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else parts[0]
 
@@ -68,7 +67,7 @@ def test_no_two_packages_import_each_other():
     assert mutual == []
 
 
-@pytest.mark.parametrize(("source", "upward"), [("from offroad_path.evaluation.sections import x\n", True),
+@pytest.mark.parametrize(("source", "upward"), [("from offroad_path.evaluate.sections import x\n", True),
                                                 ("from offroad_path.errors import InputError\n", False)])  # fmt: skip
 def test_the_check_sees_an_upward_import(tmp_path, monkeypatch, source, upward):
     """The graph is read from the source: a config module importing evaluation is caught."""
@@ -111,3 +110,34 @@ def test_no_import_circle_between_modules():
                     seen.add(nxt)
                     frontier.append(nxt)
     assert sorted(set(circles)) == []
+
+
+def test_no_two_modules_share_a_name():
+    """A module's name finds it: no two modules or packages of offroad_path are named alike
+    (a package's __init__ and __main__ aside)."""
+    names = defaultdict(list)
+    for path in PACKAGE.rglob("*.py"):
+        if path.stem not in ("__init__", "__main__"):
+            names[path.stem].append(str(path.relative_to(PACKAGE)))
+    for folder in (p.parent for p in PACKAGE.rglob("__init__.py") if p.parent != PACKAGE):
+        names[folder.name].append(f"{folder.relative_to(PACKAGE)}/")
+    assert {name: where for name, where in names.items() if len(where) > 1} == {}
+
+
+def test_no_stage_imports_another():
+    """A stage's package imports libraries only: code two stages share lives in a library below them."""
+    across = [f"{where}: {a} imports {b}" for a, b, where in imports() if a != b and a in STAGES and b in STAGES]
+    assert across == []
+
+
+def test_every_stage_is_a_package_named_as_its_command():
+    """`python -m offroad_path.<stage>` runs the package of that name: its function in __init__.py, a short
+    __main__.py, and no top-level module but the shared ones (errors, looks, stage)."""
+    from offroad_path.stage import stage_modules
+
+    assert sorted(STAGES) == sorted([*stage_modules(), "calibrate"])  # calibrate: a command of its own, no Hydra stage
+    for stage in STAGES:
+        assert (PACKAGE / stage / "__init__.py").is_file() and (PACKAGE / stage / "__main__.py").is_file(), stage
+        assert len((PACKAGE / stage / "__main__.py").read_text().splitlines()) <= 5, f"{stage}/__main__.py: only the call of main"
+    top = sorted(p.stem for p in PACKAGE.glob("*.py"))
+    assert top == ["__init__", "errors", "looks", "stage"]

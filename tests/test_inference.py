@@ -14,11 +14,11 @@ import torch
 
 from offroad_path.errors import InputError
 from offroad_path.export import run_export
+from offroad_path.export.onnx_export import export_onnx
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
-from offroad_path.inference.export import export_onnx
-from offroad_path.inference.sources import open_source
 from offroad_path.models import MODELS, build_model
 from offroad_path.predict import run_predict
+from offroad_path.predict.frame_sources import open_source
 from offroad_path.sequence.reader import open_sequence
 
 

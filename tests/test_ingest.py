@@ -15,8 +15,8 @@ from raw_rig import body_poses, write_bag, write_videos
 from offroad_path.errors import InputError
 from offroad_path.ingest import ingest
 from offroad_path.label import label
-from offroad_path.recordings.calibration import CameraModel, StereoRig, rig_from_camera_infos, write_opencv
 from offroad_path.recordings.rectify import Rectifier
+from offroad_path.recordings.rig_calibration import CameraModel, StereoRig, rig_from_camera_infos, write_opencv
 from offroad_path.sequence.reader import open_sequence
 
 LEFT, RIGHT = "/stereo/left/image_raw", "/stereo/right/image_raw"

@@ -16,7 +16,7 @@ from raw_rig import RosMessages, body_poses, write_bag, write_videos
 from offroad_path.errors import InputError
 from offroad_path.ingest import ingest
 from offroad_path.recordings.bags import decode_image, info_topic_for
-from offroad_path.recordings.calibration import CameraModel, StereoRig, read_rig, write_opencv
+from offroad_path.recordings.rig_calibration import CameraModel, StereoRig, read_rig, write_opencv
 from offroad_path.recordings.sync import SyncStats, pair_by_stamp, poses_at
 from offroad_path.recordings.video import estimate_offset
 

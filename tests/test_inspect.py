@@ -1,4 +1,4 @@
-"""`python -m offroad_path.labelling.inspect`: the label run of the test drive in a Rerun recording,
+"""`python -m offroad_path.label.inspect`: the label run of the test drive in a Rerun recording,
 read back entity by entity, and the footprint check that catches a wrong camera height."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from offroad_path.labelling.inspect import main
+from offroad_path.label.inspect import main
 
 
 def entities(rrd: Path) -> dict[str, dict[str, list]]:

@@ -1,4 +1,4 @@
-"""labelling.compare: two label runs of the same recordings, frame by frame (mean and minimum IoU,
+"""label.compare: two label runs of the same recordings, frame by frame (mean and minimum IoU,
 frames only one labelled), and its command."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from offroad_path.labelling.compare import compare
+from offroad_path.label.compare import compare
 
 
 def write(path, mask) -> None:
@@ -30,6 +30,6 @@ def test_iou_per_common_frame_by_hand(tmp_path):
     result = compare(tmp_path / "A", tmp_path / "B")
     assert result == {"common": 2, "only_a": 1, "only_b": 0, "mean_iou": pytest.approx(0.75), "min_iou": pytest.approx(0.5)}
     run = subprocess.run(
-        [sys.executable, "-m", "offroad_path.labelling.compare", str(tmp_path / "A"), str(tmp_path / "B")], capture_output=True, text=True
+        [sys.executable, "-m", "offroad_path.label.compare", str(tmp_path / "A"), str(tmp_path / "B")], capture_output=True, text=True
     )
     assert run.returncode == 0 and "2 frames labelled in both: mean IoU 0.7500, min 0.5000" in run.stdout

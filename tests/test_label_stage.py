@@ -18,11 +18,11 @@ import pytest
 from common import openblas_cores, without_vector_kernels
 from helpers import file_hashes
 
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.errors import InputError
 from offroad_path.label import label
-from offroad_path.labelling.compare import compare
-from offroad_path.odometry.trajectory import drift, run_odometry
+from offroad_path.label.compare import compare
+from offroad_path.odometry.sequence_trajectory import drift, run_odometry
 from offroad_path.sequence import open_sequence
 from offroad_path.utils.atomic import MARKER
 

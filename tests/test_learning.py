@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from offroad_path.data.manifest import read_manifest, read_predictions_manifest
-from offroad_path.evaluation.metrics import counts, mean_path, pooled
+from offroad_path.evaluate.pixel_scores import counts, mean_path, pooled
 from offroad_path.models import MODELS
 from offroad_path.training.task import SegmentationTask
 

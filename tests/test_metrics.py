@@ -9,7 +9,7 @@ import pytest
 import torch
 from torchmetrics.classification import BinaryPrecisionRecallCurve
 
-from offroad_path.evaluation.metrics import counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
+from offroad_path.evaluate.pixel_scores import counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
 
 # Two 2 x 3 images. Image 0: truth has 3 path pixels, the prediction hits 2 and adds 1.
 # Image 1: truth has 1 path pixel, the prediction covers 4 pixels including it.

@@ -16,7 +16,7 @@ import pytest
 
 from offroad_path.errors import InputError
 from offroad_path.label import label
-from offroad_path.labelling.labeller import measured_depth
+from offroad_path.label.labeller import measured_depth
 from offroad_path.sequence import open_sequence
 
 KITTI00_MONO = Path(__file__).resolve().parents[2] / "shared" / "data" / "kitti00_mono"
@@ -118,8 +118,8 @@ def test_what_needs_stereo_refuses_a_mono_recording_in_one_line(compose_config, 
     occlusion = compose_config().label.occlusion
     with pytest.raises(InputError, match=r"has one camera .*: occlusion from stereo depth .* needs a stereo pair"):
         measured_depth(seq, 0, None, occlusion)
-    from offroad_path.config.labelling import OdometryConfig
-    from offroad_path.odometry.trajectory import run_odometry
+    from offroad_path.config.label_schema import OdometryConfig
+    from offroad_path.odometry.sequence_trajectory import run_odometry
 
     with pytest.raises(InputError, match="the stereo odometry and its disparity offset needs a stereo pair"):
         run_odometry(seq, OdometryConfig(**compose_config().label.odometry))
@@ -158,7 +158,7 @@ def test_the_report_says_which_test_images_were_post_processed_without_the_depth
     from types import SimpleNamespace
 
     from offroad_path.data.manifest import Sample
-    from offroad_path.evaluation.sections import ResultsTable
+    from offroad_path.evaluate.sections import ResultsTable
 
     def sample(disparity: str) -> Sample:
         return Sample("drive", 0, False, "image.png", "label.png", disparity, "", 700.0, 0.0)

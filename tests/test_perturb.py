@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from offroad_path.odometry.perturb import drifted_poses, smooth_noise
-from offroad_path.odometry.trajectory import drift
+from offroad_path.odometry.sequence_trajectory import drift
 from offroad_path.sequence.reader import open_sequence
 
 

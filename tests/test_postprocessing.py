@@ -10,8 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from offroad_path.postprocessing import PostprocessParams, postprocess
-from offroad_path.postprocessing.filter import blur, nearest_to_bottom_centre
+from offroad_path.inference.path_filter import PostprocessParams, blur, nearest_to_bottom_centre, postprocess
 
 H, W = 96, 160
 NEAR = np.full((H, W), 5.0, np.float32)  # every pixel 5 m away: the depth mask keeps all

@@ -14,8 +14,8 @@ from helpers import refused
 from raw_rig import write_bag
 
 from offroad_path.predict import run_predict
-from offroad_path.recordings.calibration import rig_from_camera_infos
 from offroad_path.recordings.rectify import Rectifier
+from offroad_path.recordings.rig_calibration import rig_from_camera_infos
 
 FRAMES = 6
 
@@ -34,7 +34,7 @@ def vehicle(drive) -> list[str]:
 def read_back(bag: Path) -> dict[str, list]:
     from rosbags.highlevel import AnyReader
 
-    from offroad_path.inference.ros_out import typestore
+    from offroad_path.predict.ros_out import typestore
 
     with AnyReader([bag], default_typestore=typestore()) as reader:
         found: dict[str, list] = {}

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from offroad_path.evaluation.readme import BEGIN, END, generated, main, with_results
+from offroad_path.report.readme import BEGIN, END, generated, main, with_results
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -57,7 +57,7 @@ def test_the_block_needs_both_markers():
 
 
 def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
-    from offroad_path.evaluation.summary import _steering, pilotnet_check
+    from offroad_path.report.summary import _steering, pilotnet_check
 
     row = {"mae": 0.1}
     evaluation = {"steering_from_paths": {"straight_ahead": {"mae": 0.21}, "pilotnet": row, "label_ceiling": {"mae": 0.07}}}

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.evaluation.metrics import counts, per_image_iou, pooled
-from offroad_path.evaluation.real import RealFrames, score_real, separability
+from offroad_path.evaluate.pixel_scores import counts, per_image_iou, pooled
+from offroad_path.evaluate.real import RealFrames, score_real, separability
 from offroad_path.label import label
 from offroad_path.statistics.bootstrap import Resampling
 
@@ -63,7 +63,7 @@ def hand_frames(labels: list[list[int]], direction: list[int], blocks: list[int]
 
 
 def test_diversity_and_the_label_centred_gain_by_hand():
-    from offroad_path.evaluation.real import real_row, separability
+    from offroad_path.evaluate.real import real_row, separability
     from offroad_path.statistics.bootstrap import Resampling
 
     frames = hand_frames([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 1], [0, 1, 1, 0]], direction=[-1, -1, 1, 0], blocks=[0, 0, 1, 1])
@@ -103,7 +103,7 @@ def test_diversity_and_the_label_centred_gain_by_hand():
 
 
 def test_far_end_correlation_and_the_other_frames_label_by_hand():
-    from offroad_path.evaluation.real import correlation, far_end, leave_one_out_labels, real_row
+    from offroad_path.evaluate.real import correlation, far_end, leave_one_out_labels, real_row
 
     paths = np.zeros((3, 10, 5), bool)
     paths[0, 2:, 0:2] = True  # far end (rows 2 and 3: ceil(0.1 * 8) = 1 row, row 2) at columns 0, 1

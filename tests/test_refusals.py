@@ -125,7 +125,7 @@ def test_a_run_stops_at_its_first_non_finite_loss_naming_the_loss_settings(compo
     import torch
     from hydra.utils import instantiate
 
-    from offroad_path.steering.task import SteeringTask
+    from offroad_path.steering.pilotnet_task import SteeringTask
 
     task = instantiate(compose_config(*tiny_overrides).model, num_classes=2, channels_last=False, _convert_="all")
     image = torch.full((2, 3, 48, 64), float("nan"))
@@ -271,7 +271,7 @@ def test_inspect_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(labelled_
     """Rerun's writer fails in a thread of its own: once a RuntimeError traceback, then not tested."""
     out = tmp_path / "inspected"
     args = (str(labelled_drive), "--recording", str(drive), "--out", str(out))
-    run = limited(100_000, "offroad_path.labelling.inspect", *args, cwd=tmp_path)
+    run = limited(100_000, "offroad_path.label.inspect", *args, cwd=tmp_path)
     assert run.returncode == 2, run.stderr[-1500:]
     errors = [line for line in run.stderr.splitlines() if line.startswith("error: ")]
     assert len(errors) == 1 and errors[0].startswith(f"error: {out / 'drive.rrd'}: the recording could not be written"), run.stderr[-1500:]
@@ -291,13 +291,11 @@ def test_a_video_that_does_not_hold_every_frame_is_an_error(tmp_path):
     assert ok.returncode == 0, ok.stderr[-800:]
 
 
-# -- labelling.inspect ------------------------------------------------------------------------------
+# -- label.inspect ------------------------------------------------------------------------------
 
 
 def inspect_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "offroad_path.labelling.inspect", *map(str, args)], capture_output=True, text=True, cwd=cwd
-    )
+    return subprocess.run([sys.executable, "-m", "offroad_path.label.inspect", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
 def test_inspect_refuses_bad_arguments_and_outputs_inside_its_inputs(labelled_drive, drive, tmp_path):
@@ -331,7 +329,7 @@ def test_inspect_stopped_by_sigterm_leaves_no_temporary_folder(labelled_drive, d
     command = [
         sys.executable,
         "-m",
-        "offroad_path.labelling.inspect",
+        "offroad_path.label.inspect",
         str(labelled_drive),
         "--recording",
         str(drive),

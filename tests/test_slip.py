@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from offroad_path.driving.vehicle import State, Vehicle, advance
+from offroad_path.drive.vehicle import State, Vehicle, advance
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.record import record_sequence, steering_under_slip
 from offroad_path.world.scene import build_world

@@ -35,9 +35,10 @@ def stage_of(command: str):
 
 
 def groups_read(command: str) -> set[str]:
-    """Every `cfg.<group>` and `cfg["<group>"]` in the stage's module, for the config's groups."""
+    """Every `cfg.<group>` and `cfg["<group>"]` in the stage's package, for the config's groups."""
     read = set()
-    for node in ast.walk(ast.parse((ROOT / "src" / "offroad_path" / f"{command}.py").read_text())):
+    package = ROOT / "src" / "offroad_path" / command
+    for node in (n for f in sorted(package.glob("*.py")) for n in ast.walk(ast.parse(f.read_text()))):
         if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "cfg":
             read.add(node.attr)
         elif isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id == "cfg" \

@@ -13,12 +13,12 @@ from offroad_path.data.dataset import EpochSampler
 from offroad_path.data.manifest import read_manifest
 from offroad_path.geometry.path import distance_along
 from offroad_path.sequence.reader import open_sequence
+from offroad_path.steering.angle_dataset import SteeringDataModule
 from offroad_path.steering.balance import balance_weights, distance_from_mean, inverse_frequency
-from offroad_path.steering.dataset import SteeringDataModule
-from offroad_path.steering.evaluation import error_by_magnitude, steering_metrics
+from offroad_path.steering.collapse import error_by_magnitude, steering_metrics
 from offroad_path.steering.frames import steering_split
 from offroad_path.steering.pilotnet import PilotNet, feature_size
-from offroad_path.steering.task import weighted_mse
+from offroad_path.steering.pilotnet_task import weighted_mse
 from offroad_path.train_steering import train_steering
 
 
@@ -120,7 +120,7 @@ def test_stage_fast_dev_run_writes_its_outputs(compose_config, labelled_drive, s
 
 
 def test_the_collapse_check_flags_a_constant_and_a_zero_pilotnet_and_passes_an_under_steering_one():
-    from offroad_path.steering.evaluation import collapse_check
+    from offroad_path.steering.collapse import collapse_check
 
     rng = np.random.default_rng(0)
     worlds = [f"w{i // 50}" for i in range(400)]  # 8 worlds of 50 frames

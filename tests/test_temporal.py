@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from offroad_path.data.manifest import read_manifest
-from offroad_path.evaluation.temporal import held_out_blocks, last_labellable, load_block, score_temporal, stability
-from offroad_path.postprocessing.temporal import TemporalFilter, warp_previous
+from offroad_path.evaluate.temporal_scores import held_out_blocks, last_labellable, load_block, score_temporal, stability
+from offroad_path.inference.temporal_filter import TemporalFilter, warp_previous
 from offroad_path.sequence.reader import open_sequence
 
 

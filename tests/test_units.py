@@ -13,7 +13,7 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from offroad_path.evaluation.metrics import non_corresponding, per_image_iou, pooled
+from offroad_path.evaluate.pixel_scores import non_corresponding, per_image_iou, pooled
 from offroad_path.statistics.scores import SCORES, Scores, accuracy, iou, iou_per_image, precision, recall
 from offroad_path.utils.atomic import UnsafeOutputError
 from offroad_path.utils.outputs import Outputs, check_outputs
@@ -181,7 +181,7 @@ def test_the_output_rule_refuses_an_output_inside_an_input_or_a_folder_of_yours(
 def test_the_configured_callbacks_follow_the_task_and_name_a_bad_one():
     from lightning.pytorch.callbacks import EarlyStopping, LearningRateMonitor
 
-    from offroad_path.steering.task import SteeringTask
+    from offroad_path.steering.pilotnet_task import SteeringTask
     from offroad_path.training.callbacks import configured_callbacks
     from offroad_path.training.task import SegmentationTask
 

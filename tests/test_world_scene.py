@@ -7,7 +7,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from offroad_path.labelling.frame_selection import select_segments
+from offroad_path.label.frame_selection import select_segments
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.record import camera_for, record_sequence, sequence_seed
 from offroad_path.world.render import render_view

@@ -48,7 +48,7 @@ def has_code(file: Path) -> bool:
 def imported_files(entry: str) -> set[Path]:
     """The package's files that running `python -m <entry>` can import."""
     seen: set[Path] = set()
-    todo = [entry]
+    todo = [entry, f"{entry}.__main__"]  # a stage package's command runs its __main__.py
     while todo:
         parts = todo.pop().split(".")
         for i in range(1, len(parts) + 1):  # importing a.b.c runs a/__init__.py and a/b/__init__.py first
@@ -73,12 +73,14 @@ def imports_of(file: Path) -> list[str]:
 
 
 def code_deps(entry: str) -> list[str]:
-    """The stage's code deps, relative to the repository: the entry point first, then folders and
+    """The stage's code deps, relative to the repository: the stage's package first, then folders and
     files in path order; a folder of which the stage imports more than half the modules with code
     stands for them."""
     used = {f for f in imported_files(entry) if has_code(f)}
     entry_file = module_file(entry)
-    deps: set[Path] = set()
+    # A stage package (its function in __init__.py) is listed whole: all of it is the stage's own code.
+    entry_dep = entry_file.parent if entry_file.name == "__init__.py" else entry_file
+    deps: set[Path] = {entry_dep}
     for file in used:
         folder = file.parent
         package_files = {f for f in folder.rglob("*.py") if has_code(f)}
@@ -86,8 +88,8 @@ def code_deps(entry: str) -> list[str]:
         deps.add(folder if whole else file)
     # A folder listed whole stands for the files and subfolders under it.
     deps = {d for d in deps if not any(p in deps for p in d.parents)}
-    rel = sorted(str(d.relative_to(ROOT)) for d in deps if d != entry_file)
-    return [str(entry_file.relative_to(ROOT)), *rel]
+    rel = sorted(str(d.relative_to(ROOT)) for d in deps if d != entry_dep)
+    return [str(entry_dep.relative_to(ROOT)), *rel]
 
 
 def rewrite(text: str) -> str:

@@ -49,10 +49,15 @@ log = logging.getLogger("offroad_path")
 SHARED = ("seed", "resume", "threads", "experiment_name")
 
 
+# Commands that are packages with a __main__ but no Hydra stage: the recordings' check, the rig calibration.
+COMMANDS = ("calibrate", "sequence")
+
+
 def stage_modules() -> list[str]:
-    """Every stage, `python -m offroad_path.<name>`: the package's top-level modules that declare a
-    function with @reads (read from their source: listing them imports none)."""
-    return sorted(p.stem for p in Path(__file__).parent.glob("*.py") if "\n@reads(" in p.read_text())
+    """Every stage, `python -m offroad_path.<name>`: the packages of offroad_path with a __main__.py,
+    but the COMMANDS (listing them imports none)."""
+    here = Path(__file__).parent
+    return sorted(p.parent.name for p in here.glob("*/__main__.py") if p.parent.name not in COMMANDS)
 
 
 Stage = Callable[[DictConfig], Any]
@@ -125,7 +130,7 @@ def _stop(signum: int, frame: Any) -> None:
 
 def stop_cleanly_on_sigterm() -> None:
     """Install _stop for SIGTERM: every stage's command does; so do the project's other commands
-    that write outputs (labelling.inspect). Run by `dvc repro`, the process also stops so when DVC is
+    that write outputs (label.inspect). Run by `dvc repro`, the process also stops so when DVC is
     gone (utils.lifetime): no stage outlives the repro."""
     signal.signal(signal.SIGTERM, _stop)
     end_with_dvc()

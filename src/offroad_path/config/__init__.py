@@ -19,10 +19,10 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from offroad_path.config.common import CONF_DIR, THREADS
-from offroad_path.config.evaluation import DriveConfig, EvaluateConfig
-from offroad_path.config.labelling import IngestConfig, LabelConfig, SplitConfig
+from offroad_path.config.evaluate_schema import DriveConfig, EvaluateConfig
+from offroad_path.config.label_schema import IngestConfig, LabelConfig, SplitConfig
 from offroad_path.config.serving import ExportConfig, MlflowConfig, PredictConfig
-from offroad_path.config.training import (
+from offroad_path.config.training_schema import (
     DataConfig,
     ModelConfig,
     PostprocessConfig,
@@ -32,7 +32,7 @@ from offroad_path.config.training import (
     TrainConfig,
     TrainerConfig,
 )
-from offroad_path.config.world import PathsConfig, RigConfig, SynthesizeConfig, WorldConfig, check_looks_drawable
+from offroad_path.config.world_schema import PathsConfig, RigConfig, SynthesizeConfig, WorldConfig, check_looks_drawable
 from offroad_path.errors import InputError
 from offroad_path.utils.rules import setting, validate
 

@@ -14,7 +14,7 @@ from offroad_path.geometry.path import distance_along
 from offroad_path.sequence.poses import read_poses
 from offroad_path.sequence.reader import Sequence, open_sequence
 
-SHARD_FILE = "shard.json"  # in a label shard's folder (labelling/shards.py): a shard is not a whole run
+SHARD_FILE = "shard.json"  # in a label shard's folder (label/shards.py): a shard is not a whole run
 
 
 @dataclass(frozen=True)

@@ -23,10 +23,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from offroad_path.config.labelling import SPLIT_STRATEGIES
+from offroad_path.config.label_schema import SPLIT_STRATEGIES
 
 if TYPE_CHECKING:
-    from offroad_path.config.labelling import SplitConfig
+    from offroad_path.config.label_schema import SplitConfig
 
 log = logging.getLogger(__name__)
 STRATEGIES = SPLIT_STRATEGIES

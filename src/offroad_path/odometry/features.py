@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.sequence.calibration import StereoCalibration
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.geometry.exact import matmul, rigid_inverse, solve
 from offroad_path.odometry.features import FrontEnd
 from offroad_path.odometry.steps import StepResult

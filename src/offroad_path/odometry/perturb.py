@@ -10,7 +10,7 @@ deviations from `percent`). Position errors then grow as a smooth random walk. `
 noise, half of it (in quadrature) in scale and half in heading: scale sd p / sqrt(2), heading-rate
 sd sqrt(2) p / 20 m (a constant rate r turns a 20 m segment's end sideways by r 20^2 / 2). The
 drift this makes, averaged within segments, is smaller: on the rendered drives the KITTI metric
-(odometry.trajectory.drift) measures about 0.6 p (seq_000, 5 draws: 0.59 p at p = 0.3 to 5), so
+(odometry.sequence_trajectory.drift) measures about 0.6 p (seq_000, 5 draws: 0.59 p at p = 0.3 to 5), so
 benchmarks/label_noise.py asks for 0.5, 1.7, 3.4 and 8.5 to make about 0.3, 1, 2 and 5 %, and
 reports the drift it measured.
 

@@ -31,7 +31,7 @@ import gtsam
 import numpy as np
 from gtsam_unstable import ProjectionFactorPPPCCal3_S2
 
-from offroad_path.config.labelling import OdometryConfig
+from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.geometry.exact import matmul, power, rigid_inverse
 from offroad_path.odometry.features import FrontEnd
 from offroad_path.odometry.steps import FALLBACKS, StepResult

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from offroad_path.errors import InputError, missing_extra
-from offroad_path.recordings.calibration import StereoRig, camera_info_dict, rig_from_camera_infos
+from offroad_path.recordings.rig_calibration import StereoRig, camera_info_dict, rig_from_camera_infos
 from offroad_path.sequence.reader import MAX_IMAGE_PIXELS
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")

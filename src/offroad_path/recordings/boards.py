@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from offroad_path.errors import InputError, one_line
-from offroad_path.recordings.calibration import CameraModel, StereoRig
+from offroad_path.recordings.rig_calibration import CameraModel, StereoRig
 from offroad_path.sequence.reader import check_pixels, png_size
 
 MIN_VIEWS = 6

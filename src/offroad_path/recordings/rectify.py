@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offroad_path.recordings.calibration import CameraModel, StereoRig
+from offroad_path.recordings.rig_calibration import CameraModel, StereoRig
 from offroad_path.sequence.calibration import StereoCalibration
 
 

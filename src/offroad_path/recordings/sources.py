@@ -15,7 +15,7 @@ from omegaconf import DictConfig
 
 from offroad_path.errors import InputError
 from offroad_path.recordings.bags import IMAGE_TYPES, INFO_TYPE, POSE_TYPES, Bag, decode_image, info_topic_for
-from offroad_path.recordings.calibration import StereoRig, camera_from_info, camera_info_dict, read_rig
+from offroad_path.recordings.rig_calibration import StereoRig, camera_from_info, camera_info_dict, read_rig
 from offroad_path.recordings.sync import SyncStats, check_pairing, pair_by_stamp, poses_at
 from offroad_path.recordings.video import estimate_offset, frames, motion_signal, probe
 

@@ -112,7 +112,7 @@ def owned(declared: Mapping, sections: tuple[str, ...]) -> dict[str, tuple[str, 
     return found
 
 
-# The sections a primary's compare can name: evaluate's and the drive's arguments (driving.report.ARGUMENTS).
+# The sections a primary's compare can name: evaluate's and the drive's arguments (drive.closed_loop.ARGUMENTS).
 SECTIONS = ("uncertainty", "steering_from_paths", "steering", "vehicle", "traction")
 
 

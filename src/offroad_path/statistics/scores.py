@@ -21,7 +21,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-TP, FP, TN, FN = range(4)  # the columns of a count array (evaluation.metrics.counts)
+TP, FP, TN, FN = range(4)  # the columns of a count array (evaluate.pixel_scores.counts)
 
 Array = TypeVar("Array", np.ndarray, "torch.Tensor")
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from offroad_path.config.training import BALANCES
+from offroad_path.config.training_schema import BALANCES
 
 BIN_WIDTH = 0.1  # of |normalised steering|: the bins of data/steering/error_by_magnitude.csv
 

@@ -32,7 +32,7 @@ class GroundCamera:
         level frame (x right, y down, z forward), as (M, 3) each."""
         rays = np.linalg.solve(self.K, np.c_[pixels, np.ones(len(pixels))].T).T  # camera frame, y down
         tilt = math.radians(self.pitch_deg)
-        # camera = rotation @ level, the rotation of labelling.footprint; level = rotation.T @ camera
+        # camera = rotation @ level, the rotation of sequence.footprint; level = rotation.T @ camera
         rotation = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(tilt), -math.sin(tilt)], [0.0, math.sin(tilt), math.cos(tilt)]])
         level = rays @ rotation
         below = level[:, 1] > 1e-6

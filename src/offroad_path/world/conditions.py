@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from offroad_path.config.world import WorldConfig
+from offroad_path.config.world_schema import WorldConfig
 from offroad_path.geometry.exact import matmul, rigid_inverse
 from offroad_path.world.classes import DIRT, GRASS, PAVED, WATER
 from offroad_path.world.groups import SINGLE_LOOK

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offroad_path.config.world import TestWorldsConfig, WorldConfig
+from offroad_path.config.world_schema import TestWorldsConfig, WorldConfig
 from offroad_path.sequence.meta import DEVELOPMENT, MAIN
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.appearance import AXES, training_values

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from offroad_path.config.world import WorldConfig
+from offroad_path.config.world_schema import WorldConfig
 from offroad_path.geometry.exact import norm_rows
 from offroad_path.world.classes import BASE_COLORS, FOLIAGE, OBSTACLE, TREE, TRUNK_COLOR
 from offroad_path.world.objects import Objects

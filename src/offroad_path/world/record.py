@@ -14,7 +14,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from offroad_path import __version__
-from offroad_path.config.world import WorldConfig
+from offroad_path.config.world_schema import WorldConfig
 from offroad_path.geometry.exact import matmul, rigid_inverse
 from offroad_path.geometry.path import path_length
 from offroad_path.sequence import meta as meta_keys

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offroad_path.config.world import WorldConfig
+from offroad_path.config.world_schema import WorldConfig
 from offroad_path.geometry.exact import matmul, norm_rows
 from offroad_path.world.appearance import LIGHTS, TRACKS, Appearance, appearance_rng, draw_appearance, rut_colour
 from offroad_path.world.appearance import palette as look_palette

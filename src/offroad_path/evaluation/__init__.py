@@ -1,1 +1,0 @@
-"""Scoring path predictions the paper's way: pooled pixel counts, baselines, the results table, figures."""

@@ -1,0 +1,204 @@
+"""The committed run's results, as the README summarises them and docs/results.md lists them: the
+composition of the tables' one renderers (offroad_path.report.rendering, stress, drive.closed_loop),
+with the sentences only these pages need (the label run, PilotNet's seeds, the drive's settings).
+offroad_path.report.readme splices it into the two pages."""
+
+from __future__ import annotations
+
+import statistics
+
+from offroad_path.report.rendering import (
+    ARGUMENTS,
+    against_pilotnet_markdown,
+    argument_markdown,
+    baselines_markdown,
+    comparisons_markdown,
+    conditions_markdown,
+    fmt,
+    primaries_markdown,
+    results_table_markdown,
+    stress_markdown,
+    temporal_markdown,
+)
+from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR
+from offroad_path.statistics.counts import power_sentence
+from offroad_path.steering.collapse import COLLAPSE_CORRELATION, COLLAPSE_SPREAD
+
+
+def results_markdown(  # noqa: PLR0913
+    evaluation: dict,
+    label: dict,
+    steering: list[dict],
+    resamples: int,
+    *,
+    drive: dict | None = None,
+    conclusions=None,
+    full: bool = True,
+    temporal_alpha: float = 0.5,
+    variants: dict[str, list[dict]] | None = None,
+    timing: dict | None = None,
+) -> str:
+    """The results' body (between the markers) from the metrics files (steering: PilotNet's metrics per
+    training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
+    evaluate.bootstrap.resamples of the run that wrote them; conclusions: its evaluate.conclusions (the
+    primaries). full: every table (docs/results.md); else the README's summary: Table 5.1, the primaries,
+    the baselines and the stress sets."""
+    u = evaluation.get("uncertainty", {})
+    blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
+    worlds = u.get("test_set", {}).get("worlds", "n/a")
+    everything = evaluation.get("by_condition", {}).get("all", {})
+    out = [
+        "The committed run: `dvc repro` of the embedded default on a 2-core CPU (`dvc.lock`, `metrics/`; "
+        + ("the evaluate stage's own report is `data/evaluation/results.md`" if full else "every other table: `docs/results.md`")
+        + "). Generated from `metrics/` (`python -m offroad_path.report.readme`; a test fails when it disagrees with them). "
+        "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
+        "the stress sets, each scored on its own.\n",
+        *([_timing_sentence(timing)] if full and timing else []),
+        f"Labels: {label['labels']} from {label['sequences']} rendered sequences, {label['segments_dropped']} segments dropped; VO drift "
+        f"over 20 m segments {label['translation_drift_pct']:.2f} % (worst sequence {label['translation_drift_pct_worst']:.2f} %), "
+        f"{label['rotation_drift_deg_per_m']:.4f} deg/m"
+        + (
+            f"; the rig's disparity offset as the VO estimated it, {label['vo_disparity_offset_px_mean']:+.3f} px on average "
+            f"(largest {label['vo_disparity_offset_px_largest']:+.3f} px)"
+            if "vo_disparity_offset_px_mean" in label
+            else ""
+        )
+        + f". Test set: {everything.get('frames', 'n/a')} images (frames and their mirrored "
+        f"copies) from {everything.get('sequences', 'n/a')} held-out test sequences, {blocks} blocks of 20 m of driving; "
+        f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % hierarchical bootstrap ({resamples} "
+        f"resamples): the {worlds} test worlds drawn with replacement, then the blocks within each drawn world, then the "
+        "training seeds, every compared method on the same draw, each method's counts pooled over its seeds; each interval "
+        f"widened by Student's t for {worlds} worlds (docs/conclusions.md). They cover which test worlds and stretches of "
+        "driving were tested; which seeds trained the networks only in part, since a few seeds show little of the seed-to-seed "
+        "spread, and a rerun on another kind of CPU trains other bytes: a primary's smallest effect of interest lies above "
+        "how far a rerun moved it.\n",
+    ]
+    out += [
+        results_table_markdown(evaluation, heading=""),
+        primaries_markdown(conclusions, evaluation.get("primaries", {}) | (drive or {}).get("primaries", {})),
+    ]
+    if "mean_path_prior" in evaluation.get("baselines", {}):
+        out += [baselines_markdown(evaluation, heading=""), ""]
+    if check := pilotnet_check(steering):
+        out.append(check)
+    for folder, seeds in (variants or {}).items():
+        if check := pilotnet_check(seeds, VARIANT_TITLES.get(folder, folder)):
+            out.append(check)
+    out.append(stress_markdown(evaluation.get("stress_sets", {}), heading="Stress sets (exploratory). "))
+    if full:
+        if table := comparisons_markdown(u, skip=(EVERY_SCRATCH_VS_PRIOR,)):  # the central claim: a primary, above
+            out += ["Exploratory comparisons, not corrected for multiplicity (paired: both on the same draws):\n", table]
+        out += _steering(evaluation, steering)
+        if c := evaluation.get("by_condition"):
+            out += [conditions_markdown(c, heading=""), ""]
+        if t := evaluation.get("temporal"):
+            out += [temporal_markdown(t, temporal_alpha, heading=""), ""]
+        out += _driving(drive or {}, conclusions)
+    return "\n".join(out).rstrip("\n") + "\n"
+
+
+def _timing_sentence(timing: dict) -> str:
+    minutes, seconds = divmod(round(timing["total_s"]), 60)
+    return (
+        f"Time: this `dvc repro` took {minutes} min {seconds} s from nothing on a {timing['machine']} "
+        f"(`metrics/pipeline_time.json`, written by `python benchmarks/pipeline_time.py --json`, with every stage's seconds).\n"
+    )
+
+
+def _steering(evaluation: dict, steering: list[dict]) -> list[str]:
+    s = evaluation.get("steering_from_paths", {})
+    if "pilotnet" not in s:
+        return []
+    first = steering[0] if steering else {}
+    errors = [seed["mean_absolute_error"] for seed in steering]
+    own = f"{fmt(first.get('mean_absolute_error', float('nan')))}" + (
+        f"; over its {len(errors)} training seeds {statistics.mean(errors):.3f} ± {statistics.stdev(errors):.3f}, mean ± sd"
+        if len(errors) > 1
+        else ""
+    )
+    lines = [
+        "Steering on the same test frames (mean absolute error of the normalised angle, each network's and PilotNet's pooled over "
+        f"their training seeds): always straight ahead {s['straight_ahead']['mae']:.3f}, PilotNet {s['pilotnet']['mae']:.3f} "
+        f"(on its own test set of {first.get('test_frames', 'n/a')} frames: {own}), the ground-truth label through pure pursuit "
+        f"{s['label_ceiling']['mae']:.3f}. Each path network through pure pursuit, and its paired difference from "
+        "PilotNet (below 0: closer to the true angle than PilotNet; exploratory unless `open_loop` is among the primaries above):\n",
+        against_pilotnet_markdown(s),
+    ]
+    return lines
+
+
+# The drive's other PilotNets (train_steering's metrics folders, config.steering_folder), by what they drive in.
+VARIANT_TITLES = {
+    "steering_slip": "PilotNet trained on slippery ground's steering (the closed loop's traction argument)",
+    "steering_curvature": "PilotNet trained on the path's curvature (the closed loop's other-vehicle argument)",
+}
+
+
+def collapsed_seeds(steering: list[dict]) -> list[int]:
+    """The PilotNet seeds that predict a near-constant (the train_steering stage's collapse check)."""
+    return [seed.get("seed", k) for k, seed in enumerate(steering) if seed.get("collapsed")]
+
+
+def pilotnet_check(steering: list[dict], name: str = "") -> str:
+    """One sentence on every seed of one PilotNet (the stage's collapse check, steering.collapse):
+    its error against straight ahead's, the spread and correlation of its predictions, and the flags;
+    name: one of the drive's other PilotNets (VARIANT_TITLES), else the open-loop one with the check's rule."""
+    if not steering:
+        return ""
+    rows = []
+    for k, seed in enumerate(steering):
+        low, high = seed.get("straight_ahead_margin_interval", (float("nan"), float("nan")))
+        straight = seed["straight_ahead_mean_absolute_error"]
+        spread = seed.get("prediction_spread_ratio")
+        agreement = f"; spread {spread:.2f} of the truth's, correlation {seed['correlation_with_truth']:.2f}" if spread is not None else ""
+        rows.append(
+            f"seed {seed.get('seed', k)} {seed['mean_absolute_error']:.3f} (straight ahead {straight:.3f}; "
+            f"margin {seed.get('straight_ahead_margin', float('nan')):+.3f} [{low:+.3f}, {high:+.3f}]{agreement})"
+        )
+    bad = collapsed_seeds(steering)
+    weak = [
+        seed.get("seed", k)
+        for k, seed in enumerate(steering)
+        if not seed.get("beats_straight_ahead", seed["straight_ahead_margin_interval"][0] > 0)
+    ]
+    verdict = (
+        f"seed {', '.join(map(str, bad))} collapsed ({len(bad)} of {len(steering)}: its output hardly moves, or not with the truth), "
+        "so what this PilotNet says of end-to-end steering is that weak"
+        if bad
+        else "no seed collapsed"
+    )
+    verdict += (
+        f"; seed {', '.join(map(str, weak))} does not steer closer to the true angle than straight ahead (the margin's interval reaches 0)"
+        if weak
+        else "; every seed steers closer to the true angle than straight ahead, the margin's 95 % interval (test worlds resampled) above 0"
+    )
+    head = (
+        f"{name}, the same check" if name
+        else "PilotNet, the end-to-end baseline, on its test frames (mean absolute error of the normalised angle per training seed; "
+        f"the train_steering stage's collapse check: collapsed when its predictions' spread is below {COLLAPSE_SPREAD:g} of the "
+        f"truth's or their correlation with the truth at or below {COLLAPSE_CORRELATION:g})"
+    )  # fmt: skip
+    return f"{head}: {'; '.join(rows)}. {verdict[0].upper()}{verdict[1:]}.\n"
+
+
+def _driving(drive: dict, conclusions=None) -> list[str]:
+    arguments = [a for a in ARGUMENTS if a in drive]
+    if not arguments:
+        return []
+    d = drive["drives"]
+    lines = [
+        f"Closed loop in the test worlds (`data/drive/results.md`, whose tables these are): {len(d['worlds'])} worlds x "
+        f"{d['starts_per_world']} start(s) x {len(d.get('seeds', [0]))} training seed(s) x {d['length_m']:g} m of route per policy; "
+        "intervals are 95 % hierarchical (worlds, starts, seeds)."
+    ]
+    if not drive.get("primaries"):
+        lines[0] += (
+            " **A pilot**: no closed-loop argument is a primary of this run (its route is far below what they need; "
+            "`experiment=gpu` and `experiment=full` test them), so these counts are exploratory rates that plan the next run, "
+            "and no direction they suggest is a finding."
+        )
+    lines += [argument_markdown(a, drive[a], heading="####") for a in arguments]
+    for name, entry in drive.get("primaries", {}).items():
+        if sentence := power_sentence(entry, conclusions.power if conclusions is not None else 0.8):
+            lines.append(f"- Primary `{name}`: {sentence} (at its planning rates in evaluate.conclusions; Holm's strictest level).")
+    return [*lines, ""]

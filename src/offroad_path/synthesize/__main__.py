@@ -1,0 +1,5 @@
+"""`python -m offroad_path.synthesize`."""
+
+from offroad_path.synthesize import main
+
+main()

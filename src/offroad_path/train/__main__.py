@@ -1,0 +1,5 @@
+"""`python -m offroad_path.train`."""
+
+from offroad_path.train import main
+
+main()
