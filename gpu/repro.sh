@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # The GPU preset's whole pipeline from nothing, in one go, on a GPU host without network
-# (docs/scaling.md): the project's packages from an offline wheelhouse, `dvc repro gpu/dvc.yaml`
-# with MLflow off, each stage timed into gpu/metrics/pipeline_time.json and the GPU's utilisation
-# sampled every second into gpu/metrics/gpu_utilisation.csv.
+# (docs/scaling.md): the project's packages from an offline wheelhouse, then gpu/dvc.yaml with MLflow
+# off and its independent stages side by side on the one GPU (tools/parallel_repro.py: --jobs at
+# once, each with its share of the cores), each stage timed into gpu/metrics/pipeline_time.json and
+# the GPU's utilisation sampled every second into gpu/metrics/gpu_utilisation.csv.
 #
 #   bash ../shared/gpu-host/wheelhouse.sh .whl --dvc     # where a package registry answers
-#   bash gpu/repro.sh [--wheelhouse .whl] [--pipeline gpu/dvc.yaml]
+#   bash gpu/repro.sh [--wheelhouse .whl] [--pipeline gpu/dvc.yaml] [--jobs 4]
 #
+# --jobs 1 runs the stages one by one, as `dvc repro gpu/dvc.yaml` does.
 # --wheelhouse none uses the Python environment as it is (a host with every package installed).
 # --pipeline tour/dvc.yaml rehearses the same steps on the tour's tiny worlds, on any CPU.
 # It refuses to start over outputs already there (the pipeline's data/, metrics/ or lock):
@@ -15,11 +17,13 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 WHEELHOUSE=.whl
 PIPELINE=gpu/dvc.yaml
+JOBS=4
 while [ $# -gt 0 ]; do
   case $1 in
     --wheelhouse) WHEELHOUSE=$2; shift 2 ;;
     --pipeline) PIPELINE=$2; shift 2 ;;
-    *) echo "error: $1: unknown argument (--wheelhouse DIR, --pipeline FILE)" >&2; exit 2 ;;
+    --jobs) JOBS=$2; shift 2 ;;
+    *) echo "error: $1: unknown argument (--wheelhouse DIR, --pipeline FILE, --jobs N)" >&2; exit 2 ;;
   esac
 done
 ROOT=$(dirname "$PIPELINE")
@@ -43,6 +47,6 @@ if command -v nvidia-smi >/dev/null; then
   SAMPLER=$!
 fi
 status=0
-python3 benchmarks/pipeline_time.py --log "$ROOT/pipeline_time.log" --json "$ROOT/metrics/pipeline_time.json" -- "$PIPELINE" || status=$?
+python3 tools/parallel_repro.py "$PIPELINE" --jobs "$JOBS" --log "$ROOT/pipeline_time.log" --json "$ROOT/metrics/pipeline_time.json" || status=$?
 [ -n "$SAMPLER" ] && kill "$SAMPLER"
 exit "$status"

@@ -1,0 +1,71 @@
+"""tools/parallel_repro.py runs a pipeline's independent stages side by side through real DVC, in a
+fresh git + DVC repository: two stages that need only the first overlap in time, the last waits for
+both, and the lock and outputs are those of one `dvc repro`; a failed stage stops what depends on it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+import yaml
+from helpers import git
+from parallel_repro import main
+
+# Each stage writes its output and the wall-clock times it ran between (seconds since the epoch).
+STAGE = (
+    '{python} -c "import pathlib, sys, time; t = time.time(); time.sleep({sleep}); '
+    "pathlib.Path('{out}').write_text(f'{{t}} {{time.time()}}\\n' + ''.join(pathlib.Path(d).read_text() for d in sys.argv[1:]))\" {deps}"
+)
+
+
+def pipeline(repo, stages: dict[str, tuple[list[str], float, bool]]) -> None:
+    """stages: name -> (the stages it reads, seconds it sleeps, whether it fails)."""
+    spec = {}
+    for name, (deps, sleep, fails) in stages.items():
+        cmd = STAGE.format(python=sys.executable, sleep=sleep, out=f"{name}.txt", deps=" ".join(f"{d}.txt" for d in deps))
+        spec[name] = {"cmd": cmd + (" && exit 3" if fails else ""), "deps": [f"{d}.txt" for d in deps] or None, "outs": [f"{name}.txt"]}
+        spec[name] = {k: v for k, v in spec[name].items() if v is not None}
+    (repo / "dvc.yaml").write_text(yaml.safe_dump({"stages": spec}, sort_keys=False))
+    git(repo, "init", "-q")
+    subprocess.run([sys.executable, "-m", "dvc", "init", "-q"], cwd=repo, check=True)
+
+
+def ran(repo, stage: str) -> tuple[float, float]:
+    start, end = (repo / f"{stage}.txt").read_text().splitlines()[0].split()
+    return float(start), float(end)
+
+
+@pytest.mark.slow(seconds=8)
+def test_independent_stages_run_side_by_side_and_the_lock_is_one_repros(tmp_path, capsys):
+    pipeline(tmp_path, {"first": ([], 0, False), "left": (["first"], 3, False), "right": (["first"], 3, False),
+                        "last": (["left", "right"], 0, False)})  # fmt: skip
+    timing = tmp_path / "metrics" / "pipeline_time.json"
+    assert main([str(tmp_path / "dvc.yaml"), "--jobs", "2", "--json", str(timing)]) == 0
+    (left_start, left_end), (right_start, right_end) = ran(tmp_path, "left"), ran(tmp_path, "right")
+    assert left_start < right_end and right_start < left_end, "left and right ran one after the other"
+    assert ran(tmp_path, "first")[1] <= min(left_start, right_start) and ran(tmp_path, "last")[0] >= max(left_end, right_end)
+    lock = yaml.safe_load((tmp_path / "dvc.lock").read_text())["stages"]
+    assert set(lock) == {"first", "left", "right", "last"}
+    status = subprocess.run([sys.executable, "-m", "dvc", "status"], cwd=tmp_path, capture_output=True, text=True)
+    assert "up to date" in status.stdout, status.stdout + status.stderr
+    timed = json.loads(timing.read_text())
+    assert set(timed["stages"]) == {"first", "left", "right", "last"} and timed["jobs"] == 2
+    assert timed["total_s"] >= timed["stages"]["left"] >= 3 and timed["total_s"] < timed["stages"]["left"] + timed["stages"]["right"] + 5
+
+
+def test_a_failed_stage_stops_what_depends_on_it_and_names_itself(tmp_path, capsys):
+    pipeline(tmp_path, {"first": ([], 0, False), "broken": (["first"], 0, True), "after": (["broken"], 0, False)})
+    assert main([str(tmp_path / "dvc.yaml"), "--jobs", "2"]) == 1
+    assert "error: stage broken failed" in capsys.readouterr().err
+    assert not (tmp_path / "after.txt").exists()
+    assert set(yaml.safe_load((tmp_path / "dvc.lock").read_text())["stages"]) == {"first"}
+
+
+def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")
+    assert main([str(tmp_path / "dvc.yaml"), "--jobs", "0"]) == 2
+    assert main([str(tmp_path / "missing" / "dvc.yaml")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("error: --jobs 0") and err[1].startswith("error: ") and "dvc.yaml" in err[1]
