@@ -37,7 +37,7 @@ if [ "$WHEELHOUSE" != none ]; then
   export PYTHONPATH=/tmp/site:$PWD/src PATH=/tmp/site/bin:$PATH  # /tmp/site first: its versions win
 fi
 export OFFROAD_MLFLOW=false  # the presets read it (mlflow.enabled): no tracking store on the host
-if [ ! -d .git ]; then  # DVC needs a repository: a copy of the working tree has none
+if ! git rev-parse --is-inside-work-tree >/dev/null 2>&1; then  # DVC needs a repository: a copy of the working tree has none
   git init -q && git add -A >/dev/null && git -c user.name=repro -c user.email=repro@localhost commit -qm "the run's tree"
 fi
 mkdir -p "$ROOT/metrics"

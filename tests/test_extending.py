@@ -116,7 +116,7 @@ class HelloConfig:
 
 
 def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc_deps(tmp_path):
-    """A stage: its package (@reads in __init__.py, a __main__.py), its conf group, its schema and Config field, a defaults line and a dvc.yaml stage."""
+    """A stage: its package (@reads in __init__.py, a __main__.py), conf group, schema, Config field, defaults line, dvc.yaml stage."""
     import shutil
     import subprocess
     import sys
