@@ -13,7 +13,7 @@ from omegaconf import OmegaConf
 
 from offroad_path.errors import InputError
 from offroad_path.report.readme import main
-from offroad_path.report.rendering import PRIMARIES_HEAD, misstated, primaries_markdown
+from offroad_path.report.rendering import primaries_markdown
 from offroad_path.statistics.counts import compare_rates, power, route_needed
 from offroad_path.statistics.primaries import check_declared, holm_levels, verdicts
 
@@ -101,22 +101,22 @@ def test_an_interval_within_the_smallest_effect_reads_no_material_difference_wha
             check_declared({"x": {"claim": "x", "compare": "uncertainty/a_vs_b", "smallest_effect": bad}}, {})
 
 
-def test_a_readme_stating_a_direction_inside_its_corrected_interval_fails_the_check(tmp_path, capsys):
-    row = "| ranking | FCN lower than U-Net | fcn-none vs unet-none | {} at 99.29 % | 0.0100 | {} |"
-    honest = "\n".join([PRIMARIES_HEAD, "| --- | --- | --- | --- | --- | --- |",
-                        row.format("-0.030 [-0.050, -0.010]", "fcn-none's IoU lower"),
-                        row.format("-0.010 [-0.030, +0.010]", "no difference measured"),
-                        row.format("ratio 0.25 [0.10, 0.60] (2 and 8 interventions)", "unet's interventions per km lower")])  # fmt: skip
-    assert misstated(honest) == []
-    inside = row.format("-0.010 [-0.030, +0.010]", "no difference measured")
-    overclaimed = honest.replace(inside, inside.replace("ranking", "pretraining").replace("no difference measured", "fcn-none's IoU lower"))
-    assert misstated(overclaimed) == ["pretraining"]
-    ratio = honest.replace("[0.10, 0.60]", "[0.10, 1.60]")  # a ratio's "no difference" is 1
-    assert misstated(ratio) == ["ranking"]
-    readme = tmp_path / "README.md"
-    readme.write_text(f"# x\n\n{overclaimed}\n")
-    assert main(["--readme", str(readme), "--metrics", str(tmp_path), "--check"]) == 1
-    assert "primaries pretraining state a direction inside their corrected interval" in capsys.readouterr().err
+def test_a_readme_whose_verdict_was_edited_to_claim_a_direction_fails_the_check(tmp_path, capsys):
+    """The primaries' verdicts come from the metrics (Verdict.direction), never from the page: a README
+    whose "no difference" was edited into a direction disagrees with its regenerated block."""
+    from helpers import ROOT
+
+    readme, results = tmp_path / "README.md", tmp_path / "results.md"
+    readme.write_text((ROOT / "README.md").read_text())
+    results.write_text((ROOT / "docs" / "results.md").read_text())
+    arguments = ["--readme", str(readme), "--results", str(results), "--metrics", str(ROOT / "metrics"), "--check"]
+    assert main(arguments) == 0
+    text = readme.read_text()
+    verdicts = [line for line in text.splitlines() if line.startswith("| ") and line.endswith(" |") and "no material difference" in line]
+    assert verdicts, "the committed run's README has a primary without a material difference"
+    readme.write_text(text.replace(verdicts[0], verdicts[0].rsplit("| no material difference", 1)[0] + "| lower |"))
+    assert main(arguments) == 1
+    assert f"{readme}: its results disagree" in capsys.readouterr().err
 
 
 def test_a_curvature_pilotnet_steers_another_vehicle_by_its_own_wheelbase():

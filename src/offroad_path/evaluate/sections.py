@@ -30,6 +30,7 @@ from offroad_path.report.rendering import (
 from offroad_path.report.tables import (
     EVERY_SCRATCH_VS_PRIOR,
     PP_KEY,
+    grid,
     markdown_table,
     method_title,
     network_name,
@@ -334,15 +335,14 @@ class PrimaryQuestions:
             f"Declared in evaluate.conclusions before the run: {len(q.primaries)} primaries in one family (these and the drive's), "
             f"tested with Holm's correction at family-wise {q.alpha:g}; the README states each verdict. Here each of this stage's: "
             "the estimate with its 95 % hierarchical-bootstrap interval and the bootstrap's two-sided p-value (uncorrected).\n",
-            "| primary | claim | comparison | estimate [95 % interval] | p (uncorrected) |",
-            "| --- | --- | --- | --- | --- |",
         ]
+        rows = []
         for name, (section, key) in self.mine.items():
             entry = self.found.get(name)  # None: this run does not make the comparison (evaluate.runs)
             shown = Interval(entry["estimate"], *entry["intervals"][0]).difference_text() if entry else "not measured"
-            p = f"{entry['p_value']:.4f}" if entry else ""
-            lines.append(f"| {name} | {q.primaries[name].claim} | {section}/{key} | {shown} | {p} |")
-        return "\n".join(lines) + "\n"
+            rows.append([name, q.primaries[name].claim, f"{section}/{key}", shown, f"{entry['p_value']:.4f}" if entry else ""])
+        header = ["primary", "claim", "comparison", "estimate [95 % interval]", "p (uncorrected)"]
+        return "\n".join([*lines, grid(header, rows)]) + "\n"
 
     def metrics(self) -> dict:
         return {"primaries": self.found} if self.found else {}

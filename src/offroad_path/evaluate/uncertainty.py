@@ -22,7 +22,7 @@ from offroad_path.errors import InputError
 from offroad_path.evaluate.pixel_scores import pooled
 from offroad_path.evaluate.scored_set import TestSet
 from offroad_path.report.rendering import comparisons_markdown
-from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR, PP_KEY, method_title, split_run_name, title
+from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR, PP_KEY, grid, method_title, split_run_name, title
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.statistics.scores import SCORES, Score, iou
 
@@ -168,11 +168,10 @@ class Uncertainty:
         lines += [
             "Each IoU's interval, and with several training seeds the mean and standard deviation of the seeds' own IoU, are "
             "in the results table above; here the other scores' intervals (raw maps) and the comparisons.\n",
-            "| method (raw) | " + " | ".join(f"{title(name)} [95 % interval]" for name in others) + " |",
-            "|" + " --- |" * (1 + len(others)),
         ]
-        lines += [f"| {method_title(run)} | " + " | ".join(self.others[run, "no"][name].text() for name in others) + " |" for run in runs]
-        return "\n".join(lines) + "\n\n" + comparisons_markdown(self.metrics()["uncertainty"])
+        header = ["method (raw)", *(f"{title(name)} [95 % interval]" for name in others)]
+        rows = [[method_title(run), *(self.others[run, "no"][name].text() for name in others)] for run in runs]
+        return "\n".join([*lines, grid(header, rows)]) + "\n\n" + comparisons_markdown(self.metrics()["uncertainty"])
 
     def metrics(self) -> dict:
         def entry(i: Interval, name: str) -> dict:

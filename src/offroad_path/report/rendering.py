@@ -15,6 +15,7 @@ from offroad_path.report.tables import (
     baseline_row,
     comparison_title,
     fmt,
+    grid,
     markdown_table,
     method_title,
     network_name,
@@ -59,12 +60,17 @@ def results_table_markdown(m: dict, heading: str = "\n## Results (Table 5.1 layo
         "networks on smaller inputs for a few hundred steps: `model.width`, `data.width`, `trainer.max_epochs`); its "
         "pretraining rows pretrained on a semantic segmentation task, as ours on the world's 8 classes, its other rows from "
         "random weights.\n",
-        "| network | pretraining | post-processing | "
-        + " | ".join(f"{title(name)} [95 % interval]" if name == "iou" else title(name) for name in SCORES)
-        + (" | IoU over seeds, mean ± sd" if seeds > 1 else "")
-        + " | paper: accuracy | paper: IoU |",
-        "|" + " --- |" * (5 + len(SCORES) + (seeds > 1)),
     ]
+    header = [
+        "network",
+        "pretraining",
+        "post-processing",
+        *(f"{title(name)} [95 % interval]" if name == "iou" else title(name) for name in SCORES),
+        *(["IoU over seeds, mean ± sd"] if seeds > 1 else []),
+        "paper: accuracy",
+        "paper: IoU",
+    ]
+    rows = []
     for run in runs:
         model, pretraining = split_run_name(run)
         for pp, key in PP_KEY.items():
@@ -74,8 +80,8 @@ def results_table_markdown(m: dict, heading: str = "\n## Results (Table 5.1 layo
             if seeds > 1:
                 cells.append(f"{entry['seed_mean']:.3f} ± {entry['seed_sd']:.3f}" if entry and "seed_mean" in entry else "")
             paper = PAPER.get((model, pretraining, pp), ("", ""))
-            lines.append(f"| {network_name(model)} | {pretraining} | {pp} | " + " | ".join([*cells, *map(str, paper)]) + " |")
-    return "\n".join(lines) + "\n"
+            rows.append([network_name(model), pretraining, pp, *cells, *map(str, paper)])
+    return "\n".join([*lines, grid(header, rows)]) + "\n"
 
 
 def comparisons_markdown(u: dict, skip: tuple[str, ...] = ()) -> str:
@@ -86,9 +92,8 @@ def comparisons_markdown(u: dict, skip: tuple[str, ...] = ()) -> str:
     weakest = next(
         (k.split("_vs_")[0] for k, v in u.items() if k.endswith("_vs_mean_path_prior") and k != EVERY_SCRATCH_VS_PRIOR and v == central), ""
     )
-    lines = ["| comparison (IoU, a - b) | difference [95 % interval] |", "| --- | --- |"]
-    lines += [f"| {comparison_title(key, weakest)} | {difference.difference_text()} |" for key, difference in found]
-    return "\n".join(lines) + "\n" if found else ""
+    rows = [[comparison_title(key, weakest), difference.difference_text()] for key, difference in found]
+    return grid(["comparison (IoU, a - b)", "difference [95 % interval]"], rows) + "\n" if found else ""
 
 
 def against_pilotnet_markdown(s: dict) -> str:
@@ -99,18 +104,18 @@ def against_pilotnet_markdown(s: dict) -> str:
         if key.endswith("_vs_pilotnet") or key in ("straight_ahead", "pilotnet", "label_ceiling"):
             continue
         difference = interval(s.get(f"{key}_vs_pilotnet"), "mae_difference")
-        rows.append(f"| {method_title(key)} + pure pursuit | {row['mae']:.3f} | {difference.difference_text() if difference else 'n/a'} |")
-    return "\n".join(["| method | MAE | minus PilotNet [95 % interval] |", "| --- | --- | --- |", *rows]) + "\n"
+        rows.append([f"{method_title(key)} + pure pursuit", f"{row['mae']:.3f}", difference.difference_text() if difference else "n/a"])
+    return grid(["method", "MAE", "minus PilotNet [95 % interval]"], rows) + "\n"
 
 
 QUANTITY = {"uncertainty": "IoU", "steering_from_paths": "steering error"}  # what a primary compares; the drive's: interventions
-PRIMARIES_HEAD = "| primary | claim | a vs b | estimate [Holm-corrected interval] | p | verdict |"
+PRIMARIES_HEADER = ["primary", "claim", "a vs b", "estimate [Holm-corrected interval]", "p", "verdict"]
 
 
 def primaries_markdown(conclusions, measured: dict[str, dict]) -> str:
     """The family of primaries (evaluate.conclusions) with Holm's verdicts, from the entries each stage
     recorded (`primaries` of evaluate's and the drive's metrics): each interval at the level Holm's step
-    gives it. The README's: a direction only where Holm rejects no difference (`misstated` checks it)."""
+    gives it. The README's: a direction only where Holm rejects no difference (Verdict.direction)."""
     if conclusions is None or not conclusions.primaries:
         return ""
     found = verdicts(conclusions.primaries, measured, conclusions.alpha)
@@ -120,20 +125,18 @@ def primaries_markdown(conclusions, measured: dict[str, dict]) -> str:
         "by the exact test of their interventions); each interval is at the level Holm's step gives it, and a verdict states a "
         "direction only when Holm rejects no difference and the interval reaches beyond the primary's smallest effect of interest "
         "(`smallest_effect`); an interval within it reads no material difference. Every other comparison below is exploratory.\n",
-        PRIMARIES_HEAD,
-        "| --- | --- | --- | --- | --- | --- |",
+        grid(PRIMARIES_HEADER, [_primary_row(v, measured.get(v.name, {})) for v in found]),
     ]
-    lines += [_primary_row(v, measured.get(v.name, {})) for v in found]
     return "\n".join(lines) + "\n"
 
 
-def _primary_row(v: Verdict, entry: dict) -> str:
+def _primary_row(v: Verdict, entry: dict) -> list[str]:
     section, _, key = v.compare.partition("/")
     a, _, b = key.replace("_postprocessed_vs_raw", "-postprocessed_vs_raw").partition("_vs_")
     if entry.get("weakest"):  # the intersection-union test rests on its weakest member
         a = f"{a} (weakest: {entry['weakest']})"
     if v.interval is None:
-        return f"| {v.name} | {v.claim} | {a} vs {b} | not measured | | not measured |"
+        return [v.name, v.claim, f"{a} vs {b}", "not measured", "", "not measured"]
     i = v.interval
     if v.null == 1.0:  # a rate ratio, a over b
         shown = f"ratio {i.estimate:.2f} [{i.low:.2f}, {i.high:.2f}]"
@@ -147,24 +150,7 @@ def _primary_row(v: Verdict, entry: dict) -> str:
     else:
         verdict = f"{a}'s {quantity} {v.direction}" if v.direction else "no difference measured"
     p = f"{v.p_value:.4f}" if v.p_value >= 1e-4 else "< 0.0001"
-    return f"| {v.name} | {v.claim} | {a} vs {b} | {shown} at {100 * v.level:.2f} % | {p} | {verdict} |"
-
-
-def misstated(readme: str) -> list[str]:
-    """The primaries' rows that state a direction although their interval holds no difference (0 for
-    a difference, 1 for a ratio): what the README must never say."""
-    wrong = []
-    inside = False
-    for line in readme.splitlines():
-        inside = line == PRIMARIES_HEAD or (inside and line.startswith("|"))
-        cells = [c.strip() for c in line.strip("|").split("|")]
-        if not inside or line == PRIMARIES_HEAD or len(cells) != 6 or "[" not in cells[3]:
-            continue
-        low, high = (float(x) for x in cells[3].split("[", 1)[1].split("]", 1)[0].split(","))
-        null = 1.0 if cells[3].startswith("ratio") else 0.0
-        if low < null < high and not cells[5].startswith("no "):  # a bound shown as the null is rounding
-            wrong.append(cells[0])
-    return wrong
+    return [v.name, v.claim, f"{a} vs {b}", f"{shown} at {100 * v.level:.2f} %", p, verdict]
 
 
 def baselines_markdown(m: dict, heading: str = "\n## Baselines\n\n") -> str:
@@ -211,13 +197,10 @@ def conditions_markdown(c: dict[str, dict], heading: str = "\n## Results by cond
         "hierarchical-bootstrap interval (the test worlds that hold the group's frames, their blocks, the seeds), and the "
         "number of test sequences they come from; a group within one or two sequences says little. Exploratory: no "
         "correction for multiplicity.\n",
-        "| condition | test images | test sequences | " + " | ".join(title(m) if m in TITLES else method_title(m) for m in methods) + " |",
-        "|" + " --- |" * (3 + len(methods)),
     ]
-    for key, row in c.items():
-        cells = [_condition_cell(row, m) for m in methods]
-        lines.append(f"| {title(key)} | {row['frames']} | {row.get('sequences', '')} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n" + _against_prior(c.get("off_track", {}), title("off_track"))
+    header = ["condition", "test images", "test sequences", *(title(m) if m in TITLES else method_title(m) for m in methods)]
+    rows = [[title(key), row["frames"], row.get("sequences", ""), *(_condition_cell(row, m) for m in methods)] for key, row in c.items()]
+    return "\n".join([*lines, grid(header, rows)]) + "\n" + _against_prior(c.get("off_track", {}), title("off_track"))
 
 
 def _condition_cell(row: dict, method: str) -> str:
@@ -282,15 +265,12 @@ def stress_markdown(found: dict, heading: str = "\n## Stress sets\n\n") -> str:
     if not found:
         return ""
     runs = [key for key, value in next(iter(found.values())).items() if isinstance(value, dict)]
-    lines = [
-        heading + STRESS_INTRO + "\n",
-        "| stress set | worlds | test images | mean-path prior | " + " | ".join(method_title(r) for r in runs) + " |",
-        "|" + " --- |" * (4 + len(runs)),
-    ]
+    header = ["stress set", "worlds", "test images", "mean-path prior", *(method_title(r) for r in runs)]
+    rows = []
     for name, row in found.items():
         cells = [_stress_cell(row[r]) if row["worlds"] >= MIN_WORLDS else f"{row[r]['iou']:.3f}" for r in runs]
-        lines.append(f"| {title(name)} | {row['worlds']} | {row['frames']} | {row['mean_path_prior']:.3f} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([title(name), row["worlds"], row["frames"], f"{row['mean_path_prior']:.3f}", *cells])
+    return heading + STRESS_INTRO + "\n\n" + grid(header, rows) + "\n"
 
 
 def _stress_cell(entry: dict) -> str:
@@ -312,26 +292,29 @@ def _interval_of(entry: dict) -> Interval:
 
 def drive_table(policies: dict[str, dict]) -> str:
     """A markdown table, one row per policy, from each policy's metrics (PolicyScore.as_dict)."""
+    header = ["policy", "driven (m)", "interventions", "per km of route [95 % CI]", "autonomy % [95 % CI]", "mean offset (m) [95 % CI]",
+              "95th pct offset (m) [95 % CI]", "water entries per km", "steps without a path"]  # fmt: skip
     rows = [
-        "| policy | driven (m) | interventions | per km of route [95 % CI] | autonomy % [95 % CI] | mean offset (m) [95 % CI] | "
-        "95th pct offset (m) [95 % CI] | water entries per km | steps without a path |",
-        "|" + " --- |" * 9,
+        [
+            name,
+            f"{p['distance_m']:.0f}",
+            p["interventions"],
+            _interval_of(p["interventions_per_km"]).text(1),
+            _interval_of(p["autonomy_pct"]).text(1),
+            _interval_of(p["mean_offset_m"]).text(2),
+            _interval_of(p["p95_offset_m"]).text(2),
+            f"{p['water_entries_per_km']:.1f}",
+            p["no_path_steps"],
+        ]
+        for name, p in policies.items()
     ]
-    for name, p in policies.items():
-        rows.append(
-            f"| {name} | {p['distance_m']:.0f} | {p['interventions']} | {_interval_of(p['interventions_per_km']).text(1)} | "
-            f"{_interval_of(p['autonomy_pct']).text(1)} | {_interval_of(p['mean_offset_m']).text(2)} | "
-            f"{_interval_of(p['p95_offset_m']).text(2)} | "
-            f"{p['water_entries_per_km']:.1f} | {p['no_path_steps']} |"
-        )
-    return "\n".join(rows)
+    return grid(header, rows)
 
 
 def comparison_table(differences: dict[str, dict]) -> str:
     """Path minus end to end per pair ("a - b" -> value, low, high: the metrics' path_minus_end_to_end)."""
-    rows = ["| path policy | end to end | interventions per km, path - end to end [95 % CI] |", "| --- | --- | --- |"]
-    rows += [f"| {pair.replace(' - ', ' | ', 1)} | {_interval_of(i).difference_text(2)} |" for pair, i in differences.items()]
-    return "\n".join(rows)
+    rows = [[*pair.split(" - ", 1), _interval_of(i).difference_text(2)] for pair, i in differences.items()]
+    return grid(["path policy", "end to end", "interventions per km, path - end to end [95 % CI]"], rows)
 
 
 def argument_markdown(argument: str, entry: dict, heading: str = "##") -> str:

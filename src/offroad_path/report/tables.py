@@ -7,7 +7,7 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 
 from offroad_path.statistics.scores import SCORES, Record
@@ -110,12 +110,18 @@ def _value(row, name: str):
     return row[name] if isinstance(row, dict) else getattr(row, name)
 
 
+def grid(header: Sequence[str], rows: Iterable[Sequence[object]]) -> str:
+    """The one Markdown table builder of every report table (README, docs/results.md, results.md,
+    the drive's): a header row, the separator and one row per cell list; no trailing newline."""
+    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
 def markdown_table(rows: list) -> str:
     """A Markdown table of rows (Records or dataclasses), one column per key or field."""
     columns = _columns(rows[0])
-    lines = ["| " + " | ".join(title for _, title in columns) + " |", "|" + " --- |" * len(columns)]
-    lines += ["| " + " | ".join(fmt(_value(row, name)) for name, _ in columns) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
+    return grid([title for _, title in columns], ([fmt(_value(row, name)) for name, _ in columns] for row in rows)) + "\n"
 
 
 def csv_text(rows: list) -> str:
