@@ -80,16 +80,25 @@ def test_pilotnet_seeds_are_summarised_and_a_collapsed_one_is_named():
 HISTORY_PAGES: set[str] = set()  # history lives in CHANGELOG.md alone
 
 
-def test_the_readme_and_the_docs_name_no_commit():
-    """A "before" is rebuilt from a tag or the CHANGELOG's entry: no commit hash in the README or docs/
-    (history lives in CHANGELOG.md)."""
+def test_the_readme_the_docs_and_the_benchmarks_name_no_commit():
+    """A "before" is rebuilt from a tag or the CHANGELOG's entry: no commit hash in the README, docs/ or
+    benchmarks/ (history lives in CHANGELOG.md)."""
     commit = re.compile(r"(?<![\w./-])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}(?![\w-])")
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "benchmarks").glob("*.*"))]
     found = [
-        f"{path.name}: {hit}"
-        for path in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-        for hit in commit.findall(path.read_text())
+        f"{path.relative_to(ROOT)}: {hit}" for path in pages if path.suffix in (".md", ".py") for hit in commit.findall(path.read_text())
     ]
     assert not found, found
+
+
+def test_the_benchmarks_page_is_one_short_section_per_benchmark():
+    """benchmarks/README.md: what each benchmark measures, its command, its latest figure; the
+    narratives of earlier rounds live in CHANGELOG.md. Every script is named in it."""
+    page = (ROOT / "benchmarks" / "README.md").read_text()
+    assert len(page.splitlines()) <= 500
+    helpers = {"common.py", "raw_rig.py"}  # what the benchmarks share, no benchmark of their own
+    unnamed = sorted(p.name for p in (ROOT / "benchmarks").glob("*.py") if p.name not in helpers and p.name not in page)
+    assert not unnamed, f"benchmarks/README.md names no section for {unnamed}"
 
 
 def test_the_product_holds_no_issue_number_and_the_docs_no_date():
