@@ -114,10 +114,11 @@ def test_every_trained_network_writes_one_folder_per_seed_and_evaluate_reads_the
     assert list(compose_config("evaluate.drive_seeds=[3,4]").drive.seeds) == [3, 4]
 
 
-def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc_yaml(compose_config):
+def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc_yaml(compose_config, monkeypatch):
     """experiment=gpu: every look alike, ten times the drives, full-width networks on larger inputs, every core
     working; gpu/dvc.yaml is dvc.yaml's stages under it (made by tools/scaled_pipeline.py), its grid gpu/params.yaml."""
     import yaml
+    from omegaconf import OmegaConf
     from scaled_pipeline import ROOT, render
 
     from offroad_path.looks import axis_values
@@ -127,7 +128,12 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     assert gpu.synthesize.sequences >= 10 * laptop.synthesize.sequences and gpu.model.width == 1.0
     assert gpu.data.width * gpu.data.height > laptop.data.width * laptop.data.height and gpu.data.num_workers > 0
     assert gpu.synthesize.workers == gpu.label.workers == gpu.drive.workers == 0  # 0: one per core
-    assert yaml.safe_load((ROOT / "conf" / "experiment" / "gpu.yaml").read_text())["threads"] == "all"  # (the tests' config sets 1)
+    # Every core, or the share tools/parallel_repro.py gives each stage it runs at once (the tests' config sets 1).
+    threads = OmegaConf.create({"threads": yaml.safe_load((ROOT / "conf" / "experiment" / "gpu.yaml").read_text())["threads"]})
+    monkeypatch.delenv("OFFROAD_THREADS", raising=False)
+    assert threads.threads == "all"
+    monkeypatch.setenv("OFFROAD_THREADS", "4")
+    assert threads.threads == "4"
     assert {"no_track", "grass_track"} <= set(gpu.synthesize.test_worlds.stress_sets)  # in its training distribution
     assert (ROOT / "gpu" / "dvc.yaml").read_text() == render(), "gpu/dvc.yaml is stale: python tools/scaled_pipeline.py"
     pipeline, main = yaml.safe_load(render()), yaml.safe_load((ROOT / "dvc.yaml").read_text())

@@ -12,12 +12,15 @@ from torch import nn
 
 from offroad_path.models import FCN8s, SegmentationNet, SegNet, UNet
 from offroad_path.training.checkpoints import CheckpointError, load_checkpoint
+from offroad_path.training.task import BaseTask
 
 CHOICES = ("none", "segmentation", "world", "imagenet")
 
 
-def initialise(model: SegmentationNet, name: str, cfg, arch: str, width: float) -> list[str]:
-    """Apply pretraining `name` to `model`; returns the names of the parameters it set."""
+def initialise(task: BaseTask, name: str, cfg) -> list[str]:
+    """Apply pretraining `name` (its settings `cfg`) to the task's network, whose architecture and width
+    the task's hyper-parameters hold; returns the names of the parameters it set."""
+    model, arch, width = task.model, task.hparams.model, task.hparams.width
     if name == "none":
         return []
     if name == "segmentation":

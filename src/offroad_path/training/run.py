@@ -158,25 +158,45 @@ def fit(
 ) -> dict:
     """Train `task` (early stopping on task.monitor), test its best weights, and write spec.out_dir
     atomically: checkpoints/best.ckpt (weights and hyper-parameters only), metrics.json, and
-    whatever `spec.write_more` adds.
+    whatever `spec.write_more` adds; then log them to MLflow. One job per function below.
 
     Lightning's full checkpoints live in a work folder beside out_dir (`.resume/<name>-<hash>`), keyed
     by the run's identity: outside the stage's DVC output, so an interrupted run (even under
     `dvc repro`, which deletes outputs before a stage runs) resumes there when spec.resume, and
     the resumed run ends exactly as an uninterrupted one (per-epoch seeding and sampling).
     """
-    key = spec.key
-    work = spec.out_dir.parent / ".resume" / f"{spec.out_dir.name}-{key}"
-    resume = resume_checkpoint(work, key, cfg.resume)
+    work, resume = resume_folder(cfg, spec)
+    trainer, best = build_trainer(cfg, task, spec, logger, work)
+    trainer.fit(task, data, ckpt_path=resume, weights_only=True)
+    metrics = test_best(trainer, task, data, best)
+    write_outputs(spec, task, data, metrics)
+    if isinstance(logger, MLFlowLogger):
+        log_outputs(cfg, logger, spec, task, metrics)
+    return metrics
+
+
+def resume_folder(cfg: DictConfig, spec: RunSpec) -> tuple[Path, str | None]:
+    """The run's work folder (`.resume/<name>-<key>`, made on rank 0) and the checkpoint it resumes
+    from (None: it starts afresh)."""
+    work = spec.out_dir.parent / ".resume" / f"{spec.out_dir.name}-{spec.key}"
+    resume = resume_checkpoint(work, spec.key, cfg.resume)
     if not cfg.trainer.fast_dev_run and is_global_zero():
         work.mkdir(parents=True, exist_ok=True)
         (work / MARKER).write_text(f"{spec.stage} resume\n")
         warnings.filterwarnings("ignore", message="Checkpoint directory .* exists and is not empty")  # the marker, or a resume
     if resume:
         log.info("resuming from %s", resume)
+    return work, resume
+
+
+def build_trainer(
+    cfg: DictConfig, task: BaseTask, spec: RunSpec, logger: Logger | None, work: Path
+) -> tuple[L.Trainer, ModelCheckpoint | None]:
+    """The configured Trainer with the run's checkpoints in `work`, its callbacks and atomic
+    checkpoint writes; the callback that keeps the best weights (None without a validation set)."""
     # Lightning's save_last writes only when the best changes; a resume wants every epoch's end.
-    latest = ModelCheckpoint(dirpath=work, filename="last", enable_version_counter=False)
-    checkpoints = [latest]
+    checkpoints = [ModelCheckpoint(dirpath=work, filename="last", enable_version_counter=False)]
+    best = None
     without_validation = {}
     if spec.validate:
         best = ModelCheckpoint(dirpath=work, filename="best", monitor=task.monitor, mode=task.mode)
@@ -200,42 +220,58 @@ def fit(
             *configured_callbacks(cfg.callbacks, task, spec.validate, spec.patience),
             SeedEachEpoch(cfg.seed),
             StayStopped(),
-            StampConfig(key),
+            StampConfig(spec.key),
             *spec.extra_callbacks,
         ],
         plugins=[AtomicCheckpointIO()],
         enable_progress_bar=False,
     )
-    trainer.fit(task, data, ckpt_path=resume, weights_only=True)
+    return trainer, best
+
+
+def test_best(trainer: L.Trainer, task: BaseTask, data: L.LightningDataModule, best: ModelCheckpoint | None) -> dict:
+    """The best weights (the last without validation) tested: the run's metrics, its best validation
+    score among them. Another rank of a DDP run exits here: rank 0 writes the outputs."""
     best_score = None
-    if spec.validate and best.best_model_path:
+    if best is not None and best.best_model_path:
         load_weights(task, best.best_model_path)
         best_score = float(best.best_model_score) if best.best_model_score is not None else None
     tested = trainer.test(task, data, verbose=False)[0]  # under DDP, each rank tests its share; the metrics are synced
     if not trainer.is_global_zero:
-        # Another rank of a DDP run has done its part: rank 0 writes the outputs (and the stage's
-        # code after fit runs there only).
         raise SystemExit(0)
     metrics = {
-        f"best_{task.monitor.replace('/', '_')}": best_score,
+        best_key(task): best_score,
         "epochs": trainer.current_epoch,
         "global_step": trainer.global_step,
         **{k: float(v) for k, v in tested.items()},
     }
+    return metrics
+
+
+def best_key(task: BaseTask) -> str:
+    """The metrics key of the best validation score: best_val_iou for task.monitor val/iou."""
+    return f"best_{task.monitor.replace('/', '_')}"
+
+
+def write_outputs(spec: RunSpec, task: BaseTask, data: L.LightningDataModule, metrics: dict) -> None:
+    """spec.out_dir written whole or not at all: the best weights, metrics.json and spec.write_more's
+    files (whose metrics join `metrics`)."""
     with atomic_directory(spec.out_dir, spec.stage, key=spec.out_key) as tmp:
         extra = {"datamodule_hyper_parameters": dict(data.hparams)} if data.hparams else {}
-        save_weights(tmp / "checkpoints" / "best.ckpt", task, **extra, **{CONFIG_HASH: key})
+        save_weights(tmp / "checkpoints" / "best.ckpt", task, **extra, **{CONFIG_HASH: spec.key})
         if spec.write_more is not None:
             metrics.update(spec.write_more(task, data, tmp))
         (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    if isinstance(logger, MLFlowLogger):
-        logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
-        logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
-        if cfg.mlflow.log_models and spec.input_size[0]:
-            publish(logger.run_id, tracking_uri(cfg.mlflow), task, input_size=spec.input_size, manifests=spec.manifests,
-                    register_as=spec.register_as, score=best_score)  # fmt: skip
-        OPEN_RUNS.pop(logger.run_id, None)  # whole: a stop from here on is no longer this run's
-    return metrics
+
+
+def log_outputs(cfg: DictConfig, logger: MLFlowLogger, spec: RunSpec, task: BaseTask, metrics: dict) -> None:
+    """The run's metrics and checkpoint into its MLflow run, and the model published (mlflow.log_models)."""
+    logger.experiment.log_dict(logger.run_id, metrics, "metrics.json")
+    logger.experiment.log_artifact(logger.run_id, str(spec.out_dir / "checkpoints" / "best.ckpt"), "checkpoints")
+    if cfg.mlflow.log_models and spec.input_size[0]:
+        publish(logger.run_id, tracking_uri(cfg.mlflow), task, input_size=spec.input_size, manifests=spec.manifests,
+                register_as=spec.register_as, score=metrics[best_key(task)])  # fmt: skip
+    OPEN_RUNS.pop(logger.run_id, None)  # whole: a stop from here on is no longer this run's
 
 
 def fit_segmentation(
@@ -256,7 +292,7 @@ def fit_segmentation(
     data: OffroadDataModule = instantiate(cfg.data, target=target, seed=cfg.seed)
     data.setup()  # every listed file exists, before any training
     task: SegmentationTask = instantiate(m, num_classes=NUM_CLASSES[target], channels_last=own.channels_last, _convert_="all")
-    loaded = initialise(task.model, pretraining_name, pretraining, m.name, m.width)
+    loaded = initialise(task, pretraining_name, pretraining)
     if loaded:
         log.info("initialised %d parameter tensors from %s pretraining", len(loaded), pretraining_name)
     files = [data.split_dir / f"{name}.csv" for name in ("train", "val", "test")]
