@@ -150,6 +150,17 @@ def test_an_empty_mapping_that_would_change_nothing_is_refused(key):
         load_config(f"{key}={{}}")
 
 
+@pytest.mark.parametrize("value", ["2", "0", "yes"])
+def test_a_number_for_a_true_false_setting_is_refused(value):
+    """OmegaConf reads a number as a boolean: `model.batch_norm=2` once trained with batch norm."""
+    with pytest.raises(InputError, match=r"^" + re.escape(f"model.batch_norm: takes true or false, not {value}")):
+        load_config("model=fcn", f"model.batch_norm={value}")
+
+
+def test_true_false_and_null_are_taken():
+    assert [load_config("model=fcn", f"model.batch_norm={v}").model.batch_norm for v in ("true", "False", "null")] == [True, False, None]
+
+
 def test_an_axis_override_merges_and_a_deleted_entry_is_gone():
     """What the config comment documents: `track={ruts:1}` keeps the other tracks' weights; `~` drops one."""
     merged = load_config("world.appearance.weights.track={ruts:1}").world.appearance.weights.track

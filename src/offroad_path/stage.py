@@ -31,7 +31,7 @@ from hydra.errors import HydraException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from offroad_path.config import check_empty_mappings, register_configs, validate_config
+from offroad_path.config import check_overrides, register_configs, validate_config
 from offroad_path.config.common import CONF_DIR
 from offroad_path.errors import EXIT_BAD_INPUT, InputError, clear_errors, missing_extra, one_line
 from offroad_path.utils.atomic import remove_unfinished
@@ -242,7 +242,7 @@ def hydra_stage(stage: Stage) -> Callable[[], None]:
         # instead of leaving them beside the outputs.
         stop_cleanly_on_sigterm()
         with clear_errors():
-            check_empty_mappings(cfg, HydraConfig.get().overrides.task)
+            check_overrides(cfg, HydraConfig.get().overrides.task)
         result = run_stage(stage, cfg)
         with clear_errors():
             return objective(result, cfg.get("optimized_metric"))

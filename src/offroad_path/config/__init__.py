@@ -16,7 +16,7 @@ from typing import Any
 
 from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING, DictConfig, OmegaConf
+from omegaconf import MISSING, BooleanNode, DictConfig, OmegaConf
 
 from offroad_path.config.common import CONF_DIR, THREADS
 from offroad_path.config.evaluate_schema import DriveConfig, EvaluateConfig
@@ -115,20 +115,38 @@ def load_config(*overrides: str) -> DictConfig:
     register_configs()
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
         cfg = compose("config", overrides=list(overrides))
-    check_empty_mappings(cfg, overrides)
+    check_overrides(cfg, overrides)
     return cfg
 
 
-def check_empty_mappings(cfg: DictConfig, overrides: Iterable[str]) -> None:
-    """`key={}` on a mapping that is not empty: Hydra merges an override into a mapping, so an empty
-    one changes nothing (`world.appearance.weights={}` would still draw the default weights, `--cfg job`
-    shows the merged result). Refused naming the key, with what to write instead."""
+def check_overrides(cfg: DictConfig, overrides: Iterable[str]) -> None:
+    """The command line's overrides that Hydra would take but that mean something else: an empty
+    mapping (check_empty_mapping), a number given to a true/false setting (check_boolean)."""
     for override in overrides:
         key, _, value = override.partition("=")
         key = key.lstrip("+~")
-        if value.strip() == "{}" and isinstance(found := OmegaConf.select(cfg, key, default=None), DictConfig) and len(found):
-            raise InputError(
-                key,
-                "={} changes nothing: an override merges into the mapping (--cfg job shows the result); "
-                f"to leave an entry out, delete it (~{key}.<entry>) or give it weight 0",
-            )
+        check_empty_mapping(cfg, key, value)
+        check_boolean(cfg, key, value)
+
+
+def check_empty_mapping(cfg: DictConfig, key: str, value: str) -> None:
+    """`key={}` on a mapping that is not empty: Hydra merges an override into a mapping, so an empty
+    one changes nothing (`world.appearance.weights={}` would still draw the default weights, `--cfg job`
+    shows the merged result). Refused naming the key, with what to write instead."""
+    if value.strip() == "{}" and isinstance(found := OmegaConf.select(cfg, key, default=None), DictConfig) and len(found):
+        raise InputError(
+            key,
+            "={} changes nothing: an override merges into the mapping (--cfg job shows the result); "
+            f"to leave an entry out, delete it (~{key}.<entry>) or give it weight 0",
+        )
+
+
+def check_boolean(cfg: DictConfig, key: str, value: str) -> None:
+    """`model.batch_norm=2`: OmegaConf reads any number as a boolean (2 as true, 0 as false), so a
+    true/false setting takes only true, false or null from the command line."""
+    parent_key, _, name = key.rpartition(".")
+    parent = OmegaConf.select(cfg, parent_key, default=None) if parent_key else cfg
+    if not isinstance(parent, DictConfig) or name not in parent or not isinstance(parent._get_node(name), BooleanNode):
+        return
+    if value.strip().lower() not in ("true", "false", "null"):
+        raise InputError(key, f"takes true or false, not {value.strip()}")
