@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -117,10 +118,11 @@ def run(pipeline: Path, jobs: int, log: Path | None) -> tuple[dict[str, tuple[fl
             for stage in scheduler.order:
                 if (logs / f"{stage}.log").is_file():
                     out.writelines(f"[{stage}] {line}" for line in (logs / f"{stage}.log").read_text().splitlines(keepends=True))
-    if failed is not None:
+    if failed is not None:  # the logs stay for the user to read
         tail = (logs / f"{failed}.log").read_text().splitlines()[-20:]
         print(f"error: stage {failed} failed (its log: {logs / f'{failed}.log'}):\n" + "\n".join(tail), file=sys.stderr)
         return scheduler.spans, 1
+    shutil.rmtree(logs)
     return scheduler.spans, 0
 
 
