@@ -123,8 +123,10 @@ def check_overrides(cfg: DictConfig, overrides: Iterable[str]) -> None:
     """The command line's overrides that Hydra would take but that mean something else: an empty
     mapping (check_empty_mapping), a number given to a true/false setting (check_boolean)."""
     for override in overrides:
+        if override.startswith("~"):  # a deletion: no value to check
+            continue
         key, _, value = override.partition("=")
-        key = key.lstrip("+~")
+        key = key.lstrip("+")
         check_empty_mapping(cfg, key, value)
         check_boolean(cfg, key, value)
 
