@@ -69,3 +69,18 @@ def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
     assert main([str(tmp_path / "missing" / "dvc.yaml")]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("error: --jobs 0") and err[1].startswith("error: ") and "dvc.yaml" in err[1]
+
+
+def test_the_gpu_pipelines_graph_is_read_with_every_matrix_stage_and_its_upstream():
+    """The real gpu/dvc.yaml: every stage, `foreach` and `matrix` expanded, each depending on stages of the
+    same pipeline only; a pretrained training waits for its network's pretraining, evaluate for every
+    post-processing."""
+    from helpers import ROOT
+    from parallel_repro import stage_graph
+
+    order, upstream = stage_graph(ROOT, "gpu/dvc.yaml")
+    assert len(order) == len(set(order)) == len(upstream) and order[:3] == ["synthesize", "label", "split"]
+    assert set().union(*upstream.values()) <= set(order) and not upstream["synthesize"]
+    trained = [s for s in order if s.startswith("train_pretrained@")]
+    assert trained and all(f"pretrain@{s.split('@')[1].split('-')[0]}" in upstream[s] for s in trained)
+    assert {s for s in order if s.startswith("postprocess@")} <= upstream["evaluate"]
