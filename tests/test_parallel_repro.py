@@ -67,8 +67,10 @@ def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
     (tmp_path / "dvc.yaml").write_text("stages: {}\n")
     assert main([str(tmp_path / "dvc.yaml"), "--jobs", "0"]) == 2
     assert main([str(tmp_path / "missing" / "dvc.yaml")]) == 2
+    assert main([str(tmp_path / "dvc.yaml")]) == 2  # no DVC repository around it
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("error: --jobs 0") and err[1].startswith("error: ") and "dvc.yaml" in err[1]
+    assert err[2] == f"error: {tmp_path / 'dvc.yaml'}: not in a DVC repository (dvc init)"
 
 
 def test_the_gpu_pipelines_graph_is_read_with_every_matrix_stage_and_its_upstream():

@@ -151,7 +151,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.pipeline.is_file() or args.pipeline.name != "dvc.yaml":
         print(f"error: {args.pipeline}: not a dvc.yaml", file=sys.stderr)
         return 2
-    spans, status = run(args.pipeline, args.jobs, args.log)
+    from dvc.exceptions import NotDvcRepoError
+
+    try:
+        spans, status = run(args.pipeline, args.jobs, args.log)
+    except NotDvcRepoError:
+        print(f"error: {args.pipeline}: not in a DVC repository (dvc init)", file=sys.stderr)
+        return 2
     if args.json is not None:
         write_json(args.json, spans, args.jobs)
     return status
