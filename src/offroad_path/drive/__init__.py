@@ -35,8 +35,8 @@ def outputs(cfg: DictConfig) -> Outputs:
 
 def check_policies(d: DictConfig) -> None:
     """Every argument is known and every policy's checkpoint exists for every seed, before any world is built."""
-    from offroad_path.drive.closed_loop import ARGUMENTS
     from offroad_path.drive.worlds import BUILT_IN, TEMPORAL, checkpoint_of, pilotnet_checkpoint
+    from offroad_path.report.rendering import ARGUMENTS
 
     if unknown := sorted(set(d.arguments) - set(ARGUMENTS)):
         raise ValueError(f"drive.arguments: unknown argument {unknown[0]!r} (arguments: {', '.join(ARGUMENTS)})")
@@ -62,9 +62,10 @@ def check_policies(d: DictConfig) -> None:
 @reads("drive", "world", "postprocess", "label", "evaluate", "mlflow", writes=outputs)
 def run_drive(cfg: DictConfig) -> dict:
     # The networks and the renderer (torch among them) once the config and outputs are checked.
-    from offroad_path.drive.closed_loop import ARGUMENTS, check_arguments_primaries, report
+    from offroad_path.drive.closed_loop import check_arguments_primaries, report
     from offroad_path.drive.loop import DriveLog
     from offroad_path.drive.worlds import WorldJob, check_worlds, drive_params, drive_world, test_worlds
+    from offroad_path.report.rendering import ARGUMENTS
 
     drive = cfg.drive
     check_policies(drive)
@@ -109,7 +110,7 @@ def log_to_mlflow(cfg: DictConfig, metrics: dict) -> None:
             return
         import mlflow
 
-        from offroad_path.drive.closed_loop import ARGUMENTS
+        from offroad_path.report.rendering import ARGUMENTS
 
         logged = flatten({a: m for a, m in metrics.items() if a in (*ARGUMENTS, "primaries")})
         numbers = {k: v for k, v in logged.items() if isinstance(v, int | float)}

@@ -1,6 +1,7 @@
 """Scores of closed-loop drives, with hierarchical-bootstrap intervals (the test worlds, then the
 starts within each drawn world, then the training seeds: offroad_path.statistics.bootstrap), the
-exact test of each primary comparison's counts (statistics.counts), and the report's tables.
+exact test of each primary comparison's counts (statistics.counts), and the report (its tables:
+offroad_path.report.rendering).
 
 Per policy: interventions per km of route (progress along the reference drive, the same for every
 policy that finishes its drives, so that a paired difference is one of counts alone); autonomy,

@@ -1,6 +1,7 @@
 """Markdown of the evaluate stage's tables, rendered from its metrics (metrics/evaluation.json's
-dicts), one function per table: evaluate's results.md, the README's summary and docs/results.md
-(offroad_path.report.summary) all call these, so one table has one wording wherever it shows."""
+dicts), one function per table, each built by report.tables.grid: evaluate's results.md, the drive's,
+the README's summary and docs/results.md (offroad_path.report.summary) all call these, so one table
+has one wording wherever it shows."""
 
 from __future__ import annotations
 

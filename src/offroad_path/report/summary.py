@@ -1,5 +1,5 @@
 """The committed run's results, as the README summarises them and docs/results.md lists them: the
-composition of the tables' one renderers (offroad_path.report.rendering, stress, drive.closed_loop),
+composition of the tables' one renderers (offroad_path.report.rendering),
 with the sentences only these pages need (the label run, PilotNet's seeds, the drive's settings).
 offroad_path.report.readme splices it into the two pages."""
 
