@@ -15,7 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from helpers import label_cfg, png_declaring, refused, snapshot, tagged_processes
+from helpers import command, label_cfg, png_declaring, refused, snapshot, tagged_processes
 
 from offroad_path.label import label
 from offroad_path.postprocess import run_postprocess
@@ -166,7 +166,7 @@ def test_a_recording_without_calibration_beside_good_ones(compose_config, record
 def test_the_checker_decodes_every_frame(recordings):
     frame = recordings / "drive" / "image_r" / "000017.png"
     frame.write_bytes(frame.read_bytes()[:400])
-    run = subprocess.run([sys.executable, "-m", "offroad_path.sequence", str(recordings)], capture_output=True, text=True)
+    run = command("offroad_path.sequence", recordings)
     assert run.returncode == 2 and run.stderr.strip() == f"error: {frame}: cannot be decoded as an image"
 
 
@@ -218,8 +218,7 @@ def test_the_sequence_error_survives_pickling():
 
 
 def test_the_cli_runs_the_same_checks(tmp_path):
-    run = subprocess.run([sys.executable, "-m", "offroad_path.label", "label.stride_m=0", f"label.out_dir={tmp_path / 'x'}"],
-                         capture_output=True, text=True, cwd=ROOT)  # fmt: skip
+    run = command("offroad_path.label", "label.stride_m=0", f"label.out_dir={tmp_path / 'x'}", cwd=ROOT)
     assert run.returncode == 2 and run.stderr.strip() == "error: label.stride_m=0.0: must be a number >= 0.05"
     assert not any(tmp_path.iterdir())
 

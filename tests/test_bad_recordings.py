@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import png_declaring, refused
+from helpers import command, png_declaring, refused
 from raw_rig import RosMessages, write_bag
 
 from offroad_path.errors import InputError
@@ -167,8 +166,7 @@ def test_predict_refuses_two_images_that_would_write_one_output(compose_config, 
 
 def test_calibrate_refuses_a_zero_square_and_an_out_in_a_missing_folder(tmp_path):
     def calibrate(*args: str) -> subprocess.CompletedProcess:
-        cli = [sys.executable, "-m", "offroad_path.calibrate", str(tmp_path), str(tmp_path), "--board", "10x7", *args]
-        return subprocess.run(cli, capture_output=True, text=True, cwd=ROOT)
+        return command("offroad_path.calibrate", tmp_path, tmp_path, "--board", "10x7", *args, cwd=ROOT)
 
     zero = calibrate("--square-m", "0", "--out", str(tmp_path / "rig.yaml"))
     assert zero.returncode == 2 and zero.stderr.strip().splitlines() == [
@@ -195,15 +193,7 @@ def test_calibrate_refuses_a_zero_square_and_an_out_in_a_missing_folder(tmp_path
 @pytest.mark.slow(seconds=17)
 def test_hydra_and_search_errors_are_one_line_exit_2(tmp_path, overrides, says):
     stage = "train" if "-m" in overrides else "label"
-    cli = [
-        sys.executable,
-        "-m",
-        f"offroad_path.{stage}",
-        *overrides,
-        f"hydra.run.dir={tmp_path / 'h'}",
-        f"hydra.sweep.dir={tmp_path / 's'}",
-    ]
-    run = subprocess.run(cli, capture_output=True, text=True, cwd=tmp_path)
+    run = command(f"offroad_path.{stage}", *overrides, f"hydra.run.dir={tmp_path / 'h'}", f"hydra.sweep.dir={tmp_path / 's'}", cwd=tmp_path)
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: ") and says in lines[0], run.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -3,11 +3,8 @@ before any work."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
-from helpers import ROOT
+from helpers import ROOT, command
 
 
 @pytest.mark.parametrize(
@@ -24,8 +21,7 @@ from helpers import ROOT
     ],
 )
 def test_a_bad_argument_is_one_line_and_exit_2(script, arguments, says, tmp_path):
-    run = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *arguments, "--work", str(tmp_path / "w")],
-                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    run = command(str(ROOT / "benchmarks" / script), *arguments, "--work", tmp_path / "w")
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1 and lines[0].startswith(f"error: {says}"), run.stderr
     assert not (tmp_path / "w").exists()
@@ -42,7 +38,7 @@ def test_a_development_set_of_one_world_is_refused_before_training(script, tmp_p
     for part in ("train", "val", "development"):
         write_manifest(split / f"{part}.csv", rows if part == "development" else [])
     arguments = ["--data", str(tmp_path / "data"), "--work", str(tmp_path / "w")]
-    run = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *arguments], capture_output=True, text=True, timeout=120)
+    run = command(str(ROOT / "benchmarks" / script), *arguments)
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1, run.stderr
     assert lines[0].startswith(f"error: {split / 'development.csv'}: 1 development world(s)") and "at least 2" in lines[0]
@@ -52,7 +48,6 @@ def test_a_development_set_of_one_world_is_refused_before_training(script, tmp_p
 @pytest.mark.parametrize("script", ["label_cpu.py", "learning_curve.py", "seed_spread.py", "pipeline_time.py"])
 def test_help_prints_and_writes_nothing(script, tmp_path):
     """`--help` is help: once, a benchmark took it for its work folder and ran, writing into `./--help`."""
-    run = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), "--help"], capture_output=True, text=True, cwd=tmp_path,
-                         timeout=120)  # fmt: skip
+    run = command(str(ROOT / "benchmarks" / script), "--help", cwd=tmp_path)
     assert run.returncode == 0 and "usage:" in run.stdout, run.stderr[-800:]
     assert list(tmp_path.iterdir()) == []

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from helpers import command
 from scipy.spatial.transform import Rotation
 
 from offroad_path.recordings.boards import Board
@@ -94,7 +93,7 @@ def test_calibrate_recovers_the_rig(board, max_row_error_px, tmp_path):
     args = [str(tmp_path / "views" / "left"), str(tmp_path / "views" / "right"), "--board", f"{board.columns}x{board.rows}",
             "--square-m", str(board.square_m), "--out", str(out)]  # fmt: skip
     args += ["--marker-m", str(board.marker_m)] if board.marker_m else []
-    run = subprocess.run([sys.executable, "-m", "offroad_path.calibrate", *args], capture_output=True, text=True)
+    run = command("offroad_path.calibrate", *args)
     assert run.returncode == 0, run.stderr
     assert "RMS reprojection error" in run.stdout
     rig = read_rig(out)
@@ -109,6 +108,6 @@ def test_calibrate_refuses_too_few_views(tmp_path):
         (tmp_path / side).mkdir()
         cv2.imwrite(str(tmp_path / side / "000.png"), np.full((48, 64), 128, np.uint8))
     args = [str(tmp_path / "left"), str(tmp_path / "right"), "--board", "10x7", "--square-m", "0.04", "--out", str(tmp_path / "s.yaml")]
-    run = subprocess.run([sys.executable, "-m", "offroad_path.calibrate", *args], capture_output=True, text=True)
+    run = command("offroad_path.calibrate", *args)
     assert run.returncode == 2 and "found in both cameras in 0 of 1 views" in run.stderr and str(tmp_path / "left") in run.stderr
     assert not (tmp_path / "s.yaml").exists()

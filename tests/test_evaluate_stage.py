@@ -6,14 +6,12 @@ from __future__ import annotations
 import itertools
 import json
 import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import command, write_run
 from helpers import evaluate_config as stage_config
-from helpers import write_run
 
 from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import read_manifest, read_predictions_manifest
@@ -24,18 +22,20 @@ from offroad_path.evaluate.uncertainty import sample_blocks
 SHIFT_PX = 24
 
 
-@pytest.fixture
-def scored(compose_config, split_dir, tmp_path):
+@pytest.fixture(scope="module")
+def scored(compose_config, split_dir, tmp_path_factory):
+    """(rows, labels, maps, root): evaluate over two made-up runs, once for the tests that read it (they only read)."""
+    root = tmp_path_factory.mktemp("scored")
     samples = read_manifest(split_dir / "test.csv")
     labels = load_labels(samples).astype(np.float32)
     made = {"unet-none": labels, "fcn-none": 0.9 * np.roll(labels, SHIFT_PX, axis=2)}
     for run, maps in made.items():
-        write_run(compose_config, split_dir, tmp_path, run, 0, maps)
-    write_pilotnet_predictions(samples, tmp_path / "steering" / "predictions.csv")
+        write_run(compose_config, split_dir, root, run, 0, maps)
+    write_pilotnet_predictions(samples, root / "steering" / "predictions.csv")
     # the open loop joins the family as the GPU and full presets add it (conf/evaluate/primaries/open_loop.yaml)
     open_loop = "+evaluate/primaries@evaluate.conclusions.primaries=open_loop"
-    rows = evaluate(stage_config(compose_config, split_dir, tmp_path, "evaluate.runs=[unet-none,fcn-none]", open_loop))
-    return rows, labels.astype(bool), made
+    rows = evaluate(stage_config(compose_config, split_dir, root, "evaluate.runs=[unet-none,fcn-none]", open_loop))
+    return rows, labels.astype(bool), made, root
 
 
 def true_steering(samples) -> np.ndarray:
@@ -56,7 +56,7 @@ def write_pilotnet_predictions(samples, path: Path) -> None:
 
 
 def test_scores_match_the_known_predictions(scored):
-    rows, labels, made = scored
+    rows, labels, made, _ = scored
     perfect, perfect_post, shifted, shifted_post = rows
     assert [(r.network, r.postprocessing) for r in rows] == [("U-Net", "no"), ("U-Net", "yes"), ("FCN", "no"), ("FCN", "yes")]
     assert shifted_post.iou < perfect_post.iou
@@ -69,9 +69,9 @@ def test_scores_match_the_known_predictions(scored):
     assert 0.8 < perfect_post.iou < 1.0 and perfect_post.recall > 0.95
 
 
-def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path):
-    rows, _, _ = scored
-    found = json.loads((tmp_path / "metrics.json").read_text())["uncertainty"]
+def test_intervals_on_every_iou_and_every_comparison(scored, split_dir):
+    rows, _, _, root = scored
+    found = json.loads((root / "metrics.json").read_text())["uncertainty"]
     labels_dir = Path(read_manifest(split_dir / "test.csv")[0].label).parents[2]
     blocks = sample_blocks(read_manifest(split_dir / "test.csv"), labels_dir, 1.0)
     assert found["test_set"]["blocks"] == len(set(blocks)) >= 2
@@ -83,12 +83,12 @@ def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path
         assert shifted[name]["low"] <= shifted[name]["estimate"] <= shifted[name]["high"]
         assert shifted[name]["estimate"] == pytest.approx(value, abs=1e-6)
     # Steering: the perfect maps steer as the label does; paired against PilotNet on the same frames.
-    steering = json.loads((tmp_path / "metrics.json").read_text())["steering_from_paths"]
+    steering = json.loads((root / "metrics.json").read_text())["steering_from_paths"]
     against = steering["unet-none_vs_pilotnet"]
     assert against["mae_difference"] == pytest.approx(steering["unet-none"]["mae"] - steering["pilotnet"]["mae"], abs=1e-5)
     assert against["low"] <= against["mae_difference"] <= against["high"]
     # By condition: an interval beside every group with frames in at least two blocks, around its IoU.
-    groups = json.loads((tmp_path / "metrics.json").read_text())["by_condition"]
+    groups = json.loads((root / "metrics.json").read_text())["by_condition"]
     assert groups["all"]["sequences"] == 1 and groups["all"]["unet-none.interval"] == [1.0, 1.0]
     low, high = groups["all"]["fcn-none.interval"]
     assert low <= groups["all"]["fcn-none"] <= high
@@ -98,13 +98,13 @@ def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path
     assert set(found) == {"test_set", "unet-none.raw", "unet-none.postprocessed", "fcn-none.raw", "fcn-none.postprocessed",
                           "unet-none_vs_mean_path_prior", "fcn-none_vs_mean_path_prior", "every_scratch_run_vs_mean_path_prior",
                           "unet-none_vs_fcn-none", "unet-none_postprocessed_vs_raw", "fcn-none_postprocessed_vs_raw"}  # fmt: skip
-    report = (tmp_path / "evaluation" / "results.md").read_text()
+    report = (root / "evaluation" / "results.md").read_text()
     assert "## Uncertainty" in report and "| U-Net (none) - FCN (none) |" in report
     assert found["test_set"]["worlds"] == 1  # one rendered drive: its blocks are resampled within it
     # The primaries this run makes (the central claim over the two runs without pretraining, U-Net's
     # post-processing, U-Net against PilotNet open loop), each at Holm's levels (a family of 5) around the same estimate
     # as its comparison; the others (runs not evaluated): not measured.
-    primaries = json.loads((tmp_path / "metrics.json").read_text())["primaries"]
+    primaries = json.loads((root / "metrics.json").read_text())["primaries"]
     assert set(primaries) == {"central_claim", "postprocessing", "open_loop"}
     assert primaries["open_loop"]["estimate"] == pytest.approx(against["mae_difference"], abs=1e-6)
     assert primaries["postprocessing"]["estimate"] == pytest.approx(found["unet-none_postprocessed_vs_raw"]["iou_difference"], abs=1e-6)
@@ -114,8 +114,9 @@ def test_intervals_on_every_iou_and_every_comparison(scored, split_dir, tmp_path
     assert "## Primary questions" in report and "| ranking |" in report and "not measured" in report
 
 
-def test_the_central_claim_rests_on_the_weakest_network_against_the_prior(scored, tmp_path):
-    metrics = json.loads((tmp_path / "metrics.json").read_text())
+def test_the_central_claim_rests_on_the_weakest_network_against_the_prior(scored):
+    *_, root = scored
+    metrics = json.loads((root / "metrics.json").read_text())
     found, prior = metrics["uncertainty"], metrics["baselines"]["mean_path_prior"]["iou"]
     # each network without pretraining minus the prior painted on every test frame, paired
     for run in ("unet-none", "fcn-none"):
@@ -125,7 +126,7 @@ def test_the_central_claim_rests_on_the_weakest_network_against_the_prior(scored
     weakest = found["fcn-none_vs_mean_path_prior"]
     assert found["every_scratch_run_vs_mean_path_prior"] == weakest
     assert metrics["primaries"]["central_claim"]["estimate"] == pytest.approx(weakest["iou_difference"], abs=1e-6)
-    report = (tmp_path / "evaluation" / "results.md").read_text()
+    report = (root / "evaluation" / "results.md").read_text()
     assert "every network without pretraining - mean path prior (intersection-union: the weakest, fcn-none)" in report
 
 
@@ -162,40 +163,42 @@ def test_a_stress_set_is_scored_on_its_own_and_kept_out_of_the_main_figures(comp
     assert main_only.markdown() == "" and main_only.metrics() == {}
 
 
-def test_outputs_follow_the_contract(scored, tmp_path):
-    metrics = json.loads((tmp_path / "metrics.json").read_text())
+def test_outputs_follow_the_contract(scored):
+    *_, root = scored
+    metrics = json.loads((root / "metrics.json").read_text())
     assert set(metrics) == {"unet-none", "fcn-none", "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition"}
     assert metrics["unet-none"]["raw"]["iou"] == 1.0
     # by condition (the rendered drive's conditions.csv): the perfect maps score 1 in every group that has frames
     groups = metrics["by_condition"]
-    assert groups["all"]["frames"] == len(read_predictions_manifest(tmp_path / "runs/unet-none/seed0/predictions/manifest.csv"))
+    assert groups["all"]["frames"] == len(read_predictions_manifest(root / "runs/unet-none/seed0/predictions/manifest.csv"))
     assert all(g["unet-none"] == 1.0 for g in groups.values() if g["frames"])
     assert groups["all"]["fcn-none"] == metrics["fcn-none"]["raw"]["iou"]
-    assert "## Results by condition" in (tmp_path / "evaluation" / "results.md").read_text()
+    assert "## Results by condition" in (root / "evaluation" / "results.md").read_text()
     assert set(metrics["baselines"]) == {
         "non_corresponding.unet-none",
         "non_corresponding.fcn-none",
         "mean_path_prior",
         "colour_classifier",
     }
-    assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 [1.000, 1.000] |" in (tmp_path / "evaluation" / "results.md").read_text()
-    assert len((tmp_path / "evaluation" / "results.csv").read_text().splitlines()) == 5
-    curve = np.loadtxt(tmp_path / "pr" / "unet-none.csv", delimiter=",", skiprows=1)
+    assert "| U-Net | none | no | 1.000 | 1.000 | 1.000 | 1.000 [1.000, 1.000] |" in (root / "evaluation" / "results.md").read_text()
+    assert len((root / "evaluation" / "results.csv").read_text().splitlines()) == 5
+    curve = np.loadtxt(root / "pr" / "unet-none.csv", delimiter=",", skiprows=1)
     assert curve.shape == (101, 3) and np.allclose(curve[1:-1, 1:], 1.0)  # perfect at every threshold inside (0, 1)
-    assert sorted(p.name for p in (tmp_path / "evaluation" / "figures").iterdir()) == ["good_and_bad_cases.png", "postprocessing.png"]
-    raw = read_predictions_manifest(tmp_path / "runs/unet-none/seed0/predictions/manifest.csv")
-    post = read_predictions_manifest(tmp_path / "post/unet-none/seed0/manifest.csv")
+    assert sorted(p.name for p in (root / "evaluation" / "figures").iterdir()) == ["good_and_bad_cases.png", "postprocessing.png"]
+    raw = read_predictions_manifest(root / "runs/unet-none/seed0/predictions/manifest.csv")
+    post = read_predictions_manifest(root / "post/unet-none/seed0/manifest.csv")
     assert [s for s, _ in post] == [s for s, _ in raw]
     for (_, a), (_, b) in zip(raw, post, strict=True):
         before, after = np.load(a), np.load(b)
-        assert after.dtype == np.float16 and after.shape == before.shape and Path(b).parent.parent == tmp_path / "post/unet-none/seed0"
-    with sqlite3.connect(tmp_path / "mlflow.db") as db:
+        assert after.dtype == np.float16 and after.shape == before.shape and Path(b).parent.parent == root / "post/unet-none/seed0"
+    with sqlite3.connect(root / "mlflow.db") as db:
         (value,) = db.execute("select value from metrics where key = 'unet-none.raw.iou'").fetchone()
     assert value == 1.0
 
 
-def test_steering_from_paths_against_pilotnet(scored, split_dir, tmp_path):
-    steering = json.loads((tmp_path / "metrics.json").read_text())["steering_from_paths"]
+def test_steering_from_paths_against_pilotnet(scored, split_dir):
+    *_, root = scored
+    steering = json.loads((root / "metrics.json").read_text())["steering_from_paths"]
     assert list(steering) == [
         "straight_ahead",
         "pilotnet",
@@ -212,16 +215,16 @@ def test_steering_from_paths_against_pilotnet(scored, split_dir, tmp_path):
     assert steering["pilotnet"]["mae_steering_wheel_deg"] == pytest.approx(45.0, abs=1e-3)  # at a steering ratio of 15
     assert steering["unet-none"] == steering["label_ceiling"]  # its maps are the labels
     assert steering["label_ceiling"]["mae"] < steering["straight_ahead"]["mae"]
-    table = (tmp_path / "evaluation" / "results.md").read_text().split("## Path prediction against end-to-end steering")[1]
+    table = (root / "evaluation" / "results.md").read_text().split("## Path prediction against end-to-end steering")[1]
     assert "| PilotNet (end to end) |" in table and "| U-Net (none) + pure pursuit |" in table
 
 
 @pytest.mark.slow(seconds=9)
 def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path):
-    cli = [sys.executable, "-m", "offroad_path.evaluate", f"split.out_dir={split_dir}", f"evaluate.runs_dir={tmp_path / 'runs'}",
+    cli = ["offroad_path.evaluate", f"split.out_dir={split_dir}", f"evaluate.runs_dir={tmp_path / 'runs'}",
            "evaluate.runs=[segnet-none]", f"evaluate.out_dir={tmp_path / 'evaluation'}", f"evaluate.metrics_path={tmp_path / 'm.json'}",
            f"evaluate.plots_dir={tmp_path / 'pr'}", "mlflow.enabled=false"]  # fmt: skip
-    run = subprocess.run(cli, capture_output=True, text=True)
+    run = command(*cli)
     assert run.returncode == 2
     manifest = tmp_path / "runs" / "segnet-none" / "seed0" / "predictions" / "manifest.csv"
     assert run.stderr.strip().splitlines()[-1] == (

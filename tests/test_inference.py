@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from helpers import command
 
 from offroad_path.errors import InputError
 from offroad_path.export import run_export
@@ -136,9 +136,9 @@ def test_predict_runs_the_exported_model_like_the_checkpoint(compose_config, tra
 @pytest.mark.slow(seconds=14)
 def test_bad_input_gets_one_clear_line_and_no_output(trained, tmp_path, make, message):
     source = make(tmp_path)
-    cli = [sys.executable, "-m", "offroad_path.predict", f"predict.checkpoint={trained[0]}", f"predict.input={source}",
+    cli = ["offroad_path.predict", f"predict.checkpoint={trained[0]}", f"predict.input={source}",
            f"predict.out_dir={tmp_path / 'out'}"]  # fmt: skip
-    run = subprocess.run(cli, capture_output=True, text=True)
+    run = command(*cli)
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1] == f"error: {source}: {message}" + (
         " (.png, .jpg, .jpeg, .bmp)" if message == "holds no images" else " (OpenCV could not decode a frame)"
@@ -147,7 +147,7 @@ def test_bad_input_gets_one_clear_line_and_no_output(trained, tmp_path, make, me
 
 
 def test_predict_without_an_input_says_what_to_give(trained):
-    run = subprocess.run([sys.executable, "-m", "offroad_path.predict", f"predict.checkpoint={trained[0]}"], capture_output=True, text=True)
+    run = command("offroad_path.predict", f"predict.checkpoint={trained[0]}")
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1] == "error: predict.input is required: give it on the command line, predict.input=..."
 

@@ -3,12 +3,10 @@ frames only one labelled), and its command."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import cv2
 import numpy as np
 import pytest
+from helpers import command
 
 from offroad_path.label.compare import compare
 
@@ -29,7 +27,5 @@ def test_iou_per_common_frame_by_hand(tmp_path):
     write(tmp_path / "A" / "s" / "label" / "000009.png", a)  # only in A
     result = compare(tmp_path / "A", tmp_path / "B")
     assert result == {"common": 2, "only_a": 1, "only_b": 0, "mean_iou": pytest.approx(0.75), "min_iou": pytest.approx(0.5)}
-    run = subprocess.run(
-        [sys.executable, "-m", "offroad_path.label.compare", str(tmp_path / "A"), str(tmp_path / "B")], capture_output=True, text=True
-    )
+    run = command("offroad_path.label.compare", tmp_path / "A", tmp_path / "B")
     assert run.returncode == 0 and "2 frames labelled in both: mean IoU 0.7500, min 0.5000" in run.stdout

@@ -6,13 +6,12 @@ from __future__ import annotations
 import json
 import logging
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from helpers import command
 
 from offroad_path.errors import InputError
 from offroad_path.label import label
@@ -53,7 +52,7 @@ def test_a_folder_without_right_images_opens_as_one_camera(drive, tmp_path):
 def test_the_sequence_command_accepts_a_mono_recording(drive, tmp_path):
     recordings = [mono_copy(drive, tmp_path / "mono") / "drive"]
     recordings += [KITTI00_MONO] if (KITTI00_MONO / "calib.txt").is_file() else []  # the real one, where shared/ has it
-    run = subprocess.run([sys.executable, "-m", "offroad_path.sequence", *map(str, recordings)], capture_output=True, text=True)
+    run = command("offroad_path.sequence", *recordings)
     assert run.returncode == 0, run.stderr
     lines = run.stdout.strip().splitlines()
     assert len(lines) == len(recordings)
@@ -97,8 +96,8 @@ def test_the_split_of_a_mono_recording_has_no_disparity(compose_config, drive, t
     assert samples and all(s.disparity == "" for s in samples)
 
 
-def one_line_error(command: list[str]) -> str:
-    run = subprocess.run([sys.executable, "-m", *command, "mlflow.enabled=false"], capture_output=True, text=True)
+def one_line_error(arguments: list[str]) -> str:
+    run = command(*arguments, "mlflow.enabled=false")
     assert run.returncode == 2, run.stderr
     assert not run.stdout.strip()
     (line,) = run.stderr.strip().splitlines()

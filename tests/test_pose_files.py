@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import command
 
 from offroad_path.errors import InputError
 from offroad_path.sequence.poses import max_steps, poses_to_text, read_poses
@@ -64,13 +65,13 @@ def test_the_sequence_checker_refuses_the_jump_the_label_stage_refuses(drive, tm
     poses = read_poses(copy / "poses.txt")
     poses[7:, 0, 3] += 1000.0  # a jump of 1000 m at frame 8
     (copy / "poses.txt").write_text(poses_to_text(poses))
-    check = [sys.executable, "-m", "offroad_path.sequence", str(copy)]
-    run = subprocess.run(check, capture_output=True, text=True)
+    check = ["offroad_path.sequence", copy]
+    run = command(*check)
     assert run.returncode == 2, run.stdout
     jump = r"row 8 is 1e\+03 m from row 7, more than \S+ m at label.poses.max_speed_mps"
     assert re.fullmatch(rf"error: {copy / 'poses.txt'}: {jump}\n", run.stderr)
-    assert subprocess.run([*check, "--max-speed-mps", "1e6"], capture_output=True, text=True).returncode == 0
-    wrong = subprocess.run([*check, "--max-speed-mps", "0"], capture_output=True, text=True)
+    assert command(*check, "--max-speed-mps", "1e6").returncode == 0
+    wrong = command(*check, "--max-speed-mps", "0")
     assert wrong.returncode == 2 and "--max-speed-mps" in wrong.stderr
     from offroad_path.sequence.__main__ import main as check_sequences  # the same in-process: the speed it was given is named
 
@@ -100,12 +101,9 @@ def test_the_label_stage_refuses_a_mirrored_pose_file_before_any_label(drive, tm
     poses[:, :3, 0] *= -1
     (copy / "poses.txt").write_text(poses_to_text(poses))
     out = tmp_path / "labels"
-    run = subprocess.run(
-        [sys.executable, "-m", "offroad_path.label", f"label.in_dir={copy.parent}", f"label.out_dir={out}",
-         f"label.metrics_path={tmp_path / 'label.json'}", "label.poses.source=file", "label.occlusion.enabled=false",
-         "mlflow.enabled=false"],
-        capture_output=True, text=True,
-    )  # fmt: skip
+    run = command("offroad_path.label", f"label.in_dir={copy.parent}", f"label.out_dir={out}",
+                  f"label.metrics_path={tmp_path / 'label.json'}", "label.poses.source=file", "label.occlusion.enabled=false",
+                  "mlflow.enabled=false")  # fmt: skip
     assert run.returncode == 2, run.stderr
     assert (
         run.stderr.strip().splitlines()[-1]
@@ -126,7 +124,7 @@ def test_the_readmes_own_data_recipe_with_root_unset_writes_nothing(tmp_path):
         "error: paths.root: is empty: give a folder of yours (paths.root=DIR; the checkout's own run: paths.root=.)"
     )
     assert list(tmp_path.iterdir()) == []
-    unset = subprocess.run([sys.executable, "-m", "offroad_path.label", "experiment=own"], cwd=tmp_path, capture_output=True, text=True)
+    unset = command("offroad_path.label", "experiment=own", cwd=tmp_path)
     assert unset.returncode == 2 and unset.stderr.strip().splitlines()[-1] == (
         "error: paths.root is required (for label.in_dir): give it on the command line, paths.root=..."
     )
@@ -168,8 +166,7 @@ def test_a_root_that_is_in_or_holds_the_checkout_is_refused_and_nothing_is_writt
     root, _, dvc_stage = root.format(checkout=ROOT, name=ROOT.name, link=tmp_path / "link", metrics_link=tmp_path / "own").partition("@")
     env = {k: v for k, v in os.environ.items() if k != "DVC_STAGE"} | ({"DVC_STAGE": dvc_stage} if dvc_stage else {})
     before = {p: p.stat().st_mtime_ns for p in (ROOT / "metrics").rglob("*") if p.is_file()}
-    run = subprocess.run([sys.executable, "-m", "offroad_path.label", "paths=own", f"paths.root={root}"], cwd=ROOT,
-                         capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
+    run = command("offroad_path.label", "paths=own", f"paths.root={root}", cwd=ROOT, env=env)
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1, run.stderr
     assert re.match(r"error: paths\.(root|metrics_dir): .* resolves to .*, which (is|is inside|holds) this checkout", lines[0])

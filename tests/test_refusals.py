@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import label_cfg, png_declaring, refused, snapshot, user_folder
+from helpers import command, label_cfg, png_declaring, refused, snapshot, user_folder
 
 from offroad_path.config import load_config, validate_config
 from offroad_path.errors import InputError
@@ -307,7 +307,7 @@ def test_a_video_that_does_not_hold_every_frame_is_an_error(tmp_path):
 
 
 def inspect_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "offroad_path.label.inspect", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+    return command("offroad_path.label.inspect", *args, cwd=cwd)
 
 
 def test_inspect_refuses_bad_arguments_and_outputs_inside_its_inputs(labelled_drive, drive, tmp_path):

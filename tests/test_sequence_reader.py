@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from helpers import command
 
 from offroad_path.errors import InputError
 from offroad_path.sequence import open_sequence
@@ -133,10 +132,10 @@ def test_undecodable_image_names_the_file(sequence):
 
 
 def test_cli_checks_recordings_and_exits_non_zero_on_bad_input(sequence):
-    ok = subprocess.run([sys.executable, "-m", "offroad_path.sequence", str(sequence)], capture_output=True, text=True)
+    ok = command("offroad_path.sequence", sequence)
     assert ok.returncode == 0 and "4 stereo pairs 640x360" in ok.stdout and "baseline 0.400 m" in ok.stdout
     (sequence / "calib.txt").write_text(f"{K_ROW}\n{K_ROW}\n")
-    bad = subprocess.run([sys.executable, "-m", "offroad_path.sequence", str(sequence)], capture_output=True, text=True)
+    bad = command("offroad_path.sequence", sequence)
     assert bad.returncode == 2
     assert (
         bad.stderr.strip()

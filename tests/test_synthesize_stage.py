@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 import pytest
 from common import openblas_cores, without_vector_kernels
+from helpers import command
 from hydra.errors import ConfigCompositionException
 
 from offroad_path.sequence import open_sequence
@@ -88,11 +89,7 @@ def test_config_errors_name_the_key(compose_config, override, named):
 
 def test_cli_refuses_a_misspelt_key_before_any_work(tmp_path):
     out = tmp_path / "never"
-    run = subprocess.run(
-        [sys.executable, "-m", "offroad_path.synthesize", "world.hil_height_m=3", f"synthesize.out_dir={out}"],
-        capture_output=True,
-        text=True,
-    )
+    run = command("offroad_path.synthesize", "world.hil_height_m=3", f"synthesize.out_dir={out}")
     assert run.returncode != 0
     assert "hil_height_m" in run.stderr
     assert not out.exists()

@@ -7,15 +7,13 @@ import itertools
 import json
 import math
 import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 import yaml
-from helpers import hand_counted_iou
+from helpers import command, hand_counted_iou
 
 from offroad_path.models import MODELS, build_model
 from offroad_path.pretrain import pretrain
@@ -114,9 +112,7 @@ def test_multirun_jobs_are_children_of_one_sweep_run(split_dir, tmp_path, tiny_o
     db = tmp_path / "mlflow.db"
     overrides = [*tiny_overrides, f"data.split_dir={split_dir}", f"train.out_dir={tmp_path}/runs/${{model.name}}",
                  "trainer.fast_dev_run=true", f"mlflow.tracking_uri=sqlite:///{db}", f"hydra.sweep.dir={tmp_path / 'sweep'}"]  # fmt: skip
-    run = subprocess.run(
-        [sys.executable, "-m", "offroad_path.train", "-m", "model=unet,fcn", *overrides], capture_output=True, text=True, cwd=tmp_path
-    )
+    run = command("offroad_path.train", "-m", "model=unet,fcn", *overrides, cwd=tmp_path)
     assert run.returncode == 0, run.stderr[-2000:]
     with sqlite3.connect(db) as con:
         tags = con.execute("select run_uuid, key, value from tags").fetchall()
@@ -131,8 +127,7 @@ def test_optuna_search_trains_each_trial_and_reports_the_best(split_dir, tmp_pat
     tiny = [o for o in tiny_overrides if not o.startswith("model.width=")]  # the search sets the width
     overrides = [*tiny, f"data.split_dir={split_dir}", "trainer.max_epochs=1", "mlflow.enabled=false", f"hydra.sweep.dir={sweep}",
                  "hydra.sweeper.n_trials=2", "hydra.sweeper.sampler.n_startup_trials=1"]  # fmt: skip
-    run = subprocess.run([sys.executable, "-m", "offroad_path.train", "-m", "hparams_search=path_optuna", *overrides],
-                         capture_output=True, text=True, cwd=tmp_path)  # fmt: skip
+    run = command("offroad_path.train", "-m", "hparams_search=path_optuna", *overrides, cwd=tmp_path)
     assert run.returncode == 0, run.stderr[-2000:]
     results = yaml.safe_load((sweep / "optimization_results.yaml").read_text())
     assert set(results["best_params"]) == {"model.lr", "model.width"} and 0.0 <= results["best_value"] <= 1.0
@@ -145,7 +140,7 @@ def test_optuna_search_trains_each_trial_and_reports_the_best(split_dir, tmp_pat
 def test_a_search_for_a_metric_the_stage_does_not_return_says_so(split_dir, tmp_path, tiny_overrides):
     overrides = [*tiny_overrides, f"data.split_dir={split_dir}", "trainer.fast_dev_run=true", "mlflow.enabled=false",
                  f"train.out_dir={tmp_path / 'run'}", "optimized_metric=val_accuracy"]  # fmt: skip
-    run = subprocess.run([sys.executable, "-m", "offroad_path.train", *overrides], capture_output=True, text=True, cwd=tmp_path)
+    run = command("offroad_path.train", *overrides, cwd=tmp_path)
     assert run.returncode == 2 and "optimized_metric=val_accuracy: this stage returned no such metric" in run.stderr
 
 
@@ -153,7 +148,7 @@ def test_a_search_for_a_metric_the_stage_does_not_return_says_so(split_dir, tmp_
 def test_a_callback_that_cannot_be_built_is_named(split_dir, tmp_path, tiny_overrides):
     overrides = [*tiny_overrides, f"data.split_dir={split_dir}", "trainer.fast_dev_run=true", "mlflow.enabled=false",
                  f"train.out_dir={tmp_path / 'run'}", "+callbacks.mine._target_=lightning.pytorch.callbacks.NoSuchCallback"]  # fmt: skip
-    run = subprocess.run([sys.executable, "-m", "offroad_path.train", *overrides], capture_output=True, text=True, cwd=tmp_path)
+    run = command("offroad_path.train", *overrides, cwd=tmp_path)
     assert run.returncode == 2 and "error: callbacks.mine: cannot be built" in run.stderr, run.stderr[-2000:]
     assert not (tmp_path / "run").exists()
 
