@@ -27,6 +27,32 @@ if WORKERS > 1:
     set_threads(WORKER_THREADS)
 
 
+# A test not marked slow runs its body in under this many seconds on the 2-core machine the suite
+# is sized for (setup not counted: the session's fixtures are made by whichever test needs them
+# first); one over it fails the run, named, so the everyday tier (`pytest -m "not slow"`) stays
+# minutes. OFFROAD_NOT_SLOW_BUDGET_S raises it on a slower machine.
+NOT_SLOW_BUDGET_S = float(os.environ.get("OFFROAD_NOT_SLOW_BUDGET_S", "5"))
+over_budget: list[tuple[str, float]] = []
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if report.when == "call" and "slow" not in report.keywords and report.duration > NOT_SLOW_BUDGET_S:
+        over_budget.append((report.nodeid, report.duration))
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    if over_budget and not hasattr(terminalreporter.config, "workerinput"):
+        terminalreporter.section(f"not marked slow, yet over {NOT_SLOW_BUDGET_S:g} s (mark them slow or make them faster)")
+        for nodeid, seconds in sorted(over_budget, key=lambda entry: -entry[1]):
+            terminalreporter.write_line(f"{seconds:6.2f}s {nodeid}")
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    if over_budget and exitstatus == pytest.ExitCode.OK and not hasattr(session.config, "workerinput"):
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The slow tests first, longest first: a pytest-xdist worker that got the longest one last
     would run on alone while the others wait."""

@@ -57,6 +57,7 @@ def test_the_training_weights_leave_out_the_values_of_weight_zero_and_full_varie
         draw_appearance(0, HELD_OUT, "odd")
 
 
+@pytest.mark.slow(seconds=7)
 def test_a_look_changes_the_appearance_not_the_drive(compose_config):
     plain = build_world(compose_config(*SMALL, "world.appearance.enabled=false").world, 5)
     dressed = build_world(compose_config(*SMALL).world, 5)
@@ -78,6 +79,7 @@ def test_a_track_of_the_grass_colour_differs_from_it_only_by_wear(compose_config
         assert world.wear.any() and not world.wear[world.materials != DIRT].any()
 
 
+@pytest.mark.slow(seconds=6)
 def test_conditions_name_each_world_look_and_the_stress_sets_draw_theirs(compose_config):
     cfg = compose_config(*SMALL).world
     world = build_world(cfg, 3, "held_out")

@@ -35,6 +35,7 @@ def two_sequences(recordings: Path) -> Path:
     return recordings
 
 
+@pytest.mark.slow(seconds=4)
 def test_a_worker_error_reaches_the_parent_instead_of_hanging(recordings, tmp_path):
     two_sequences(recordings)
     frame = recordings / "drive_b" / "image_l" / "000020.png"
@@ -237,6 +238,7 @@ def test_label_values_out_of_their_real_bounds(compose_config, recordings, tmp_p
     refused(label, label_cfg(compose_config, recordings, tmp_path, *overrides), capsys, tmp_path, *named)
 
 
+@pytest.mark.slow(seconds=5)
 def test_a_dense_stride_writes_every_label_it_counts(compose_config, recordings, tmp_path):
     metrics = label(label_cfg(compose_config, recordings, tmp_path, "label.strategy=stride", "label.stride_m=0.05"))
     assert metrics["labels"] == len(list((tmp_path / "labels").glob("*/label/*.png"))) > 0

@@ -36,12 +36,14 @@ def bag_config(compose_config, bag: Path, out: Path, *overrides: str):
                           *overrides)  # fmt: skip
 
 
-@pytest.fixture
-def good_output(compose_config, rig, frames, tmp_path) -> Path:
-    """The output of an earlier good ingest, which a refused run must leave as it is."""
-    bag = write_bag(tmp_path / "good", "sqlite3", frames, rig)
-    ingest(bag_config(compose_config, bag, tmp_path / "out"))
-    return tmp_path / "out"
+@pytest.fixture(scope="module")
+def good_output(compose_config, rig, frames, tmp_path_factory) -> Path:
+    """The output of an earlier good ingest, which a refused run must leave as it is: the tests refusing
+    a run into it check that nothing changed in its folder (where a run's temporary folder would go too)."""
+    root = tmp_path_factory.mktemp("good")
+    bag = write_bag(root / "bag", "sqlite3", frames, rig)
+    ingest(bag_config(compose_config, bag, root / "out"))
+    return root / "out"
 
 
 @pytest.mark.parametrize("fx,says", [(float("nan"), "not a finite number"), (-350.0, "must be positive")], ids=["NaN", "negative"])
@@ -50,7 +52,7 @@ def test_a_camera_info_with_an_impossible_focal_length(compose_config, rig, fram
     infos[0]["k"] = infos[0]["k"].copy()
     infos[0]["k"][0] = fx
     bag = write_bag(tmp_path / "drive", "mcap", frames, rig, camera_infos=infos)
-    refused(ingest, bag_config(compose_config, bag, good_output), capsys, tmp_path, str(bag), "left camera", says)
+    refused(ingest, bag_config(compose_config, bag, good_output), capsys, good_output.parent, str(bag), "left camera", says)
 
 
 def ros_yaml(path: Path, info: dict) -> Path:
@@ -105,13 +107,14 @@ def test_a_frame_of_another_size_mid_stream(compose_config, rig, frames, good_ou
     cropped = [(left[:-8, :-8], right[:-8, :-8]) if i == 6 else (left, right) for i, (left, right) in enumerate(frames)]
     bag = write_bag(tmp_path / "drive", "sqlite3", cropped, rig)
     w, h = rig.size
-    refused(ingest, bag_config(compose_config, bag, good_output), capsys, tmp_path, str(bag), f"are {w - 8}x{h - 8}", f"first {w}x{h}")
+    refused(ingest, bag_config(compose_config, bag, good_output), capsys, good_output.parent, str(bag), f"are {w - 8}x{h - 8}",
+            f"first {w}x{h}")  # fmt: skip
 
 
 def test_one_topic_as_both_cameras(compose_config, rig, frames, good_output, tmp_path, capsys):
     bag = write_bag(tmp_path / "drive", "sqlite3", frames, rig)
     cfg = bag_config(compose_config, bag, good_output, f"ingest.topics.right={LEFT}")
-    refused(ingest, cfg, capsys, tmp_path, str(bag), "both", LEFT)
+    refused(ingest, cfg, capsys, good_output.parent, str(bag), "both", LEFT)
 
 
 def write_avi(path: Path, images: list[np.ndarray], fps: float = 5.0) -> Path:

@@ -45,6 +45,7 @@ def dvc_pipeline(tmp_path: Path, stages: dict) -> Path:
     return repo
 
 
+@pytest.mark.slow(seconds=18)
 def test_the_stages_of_one_dvc_repro_share_one_parent_run(tmp_path):
     db = tmp_path / "mlflow.db"
     command = f'{sys.executable} -c "{STAGE.format(db=db)}"'
@@ -170,6 +171,7 @@ def test_the_dashboard_over_rest_shows_the_model_its_datasets_and_the_best_versi
         assert tuple(signature.outputs.inputs[0].shape[1:]) == (2, 48, 64)  # path and not, per pixel
 
 
+@pytest.mark.slow(seconds=6)
 def test_synthesize_and_split_each_log_a_run(compose_config, labelled_drive, tmp_path):
     """Every stage shows in the dashboard: the two that logged nothing before, each with its settings and counts."""
     from offroad_path.split import split

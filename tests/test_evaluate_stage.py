@@ -233,6 +233,7 @@ def test_a_missing_run_names_its_manifest_and_writes_nothing(split_dir, tmp_path
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.slow(seconds=4)
 def test_several_seeds_pool_their_counts_and_show_their_spread(compose_config, split_dir, tmp_path):
     samples = read_manifest(split_dir / "test.csv")
     labels = load_labels(samples)

@@ -22,6 +22,7 @@ def dice(c):
     return ratio(2 * c[..., TP], 2 * c[..., TP] + c[..., FP] + c[..., FN])
 
 
+@pytest.mark.slow(seconds=5)
 def test_a_score_added_to_the_registry_reaches_every_table_and_metrics_file(compose_config, split_dir, tmp_path, monkeypatch):
     monkeypatch.setitem(scores.SCORES, "dice", dice)
     monkeypatch.setitem(scores.TITLES, "dice", "Dice")
@@ -115,6 +116,7 @@ class HelloConfig:
 '''
 
 
+@pytest.mark.slow(seconds=3)
 def test_a_stage_added_as_the_docs_say_runs_checks_its_settings_and_gets_its_dvc_deps(tmp_path):
     """A stage: its package (@reads in __init__.py, a __main__.py), conf group, schema, Config field, defaults line, dvc.yaml stage."""
     import shutil

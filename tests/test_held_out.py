@@ -65,6 +65,7 @@ def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case
         assert look.track not in ("grass_track", "none") and look.light != "hazy" and not look.outside
 
 
+@pytest.mark.slow(seconds=5)
 def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog):
     c = compose_config(
         "synthesize.test_worlds.min_blocks=1",
@@ -78,22 +79,24 @@ def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog
     assert {w.test_set for w in chosen} == {"main"} and "stress set outside_look" in caplog.text
 
 
+@pytest.mark.slow(seconds=6)
 def test_too_few_candidates_is_an_error_naming_the_set(compose_config):
+    world = compose_config("world.frames=40").world  # a short drive: one block, quick to survey
     c = compose_config("synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50").synthesize.test_worlds
     with pytest.raises(
         ValueError, match=r"test_worlds\.development_blocks: 1 candidate worlds hold fewer than 30 blocks; raise max_candidates"
     ):
-        choose_held_out_worlds(compose_config().world, c, master_seed=0, workers=1)
+        choose_held_out_worlds(world, c, master_seed=0, workers=1)
     c = compose_config(
         "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50", "synthesize.test_worlds.development_blocks=0"
     ).synthesize.test_worlds
     with pytest.raises(ValueError, match=r"test_worlds\.min_blocks: 1 candidate worlds hold fewer than 50 blocks; raise max_candidates"):
-        choose_held_out_worlds(compose_config().world, c, master_seed=0, workers=1)
+        choose_held_out_worlds(world, c, master_seed=0, workers=1)
     c = compose_config(
         "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.development_blocks=0",
         "synthesize.test_worlds.stress_sets=[shadow_water]", "synthesize.test_worlds.per_stress=2",
     ).synthesize.test_worlds  # fmt: skip
     with pytest.raises(ValueError, match=r"give stress set shadow_water [01] of 2 worlds; raise max_candidates or lower per_stress"):
-        choose_held_out_worlds(compose_config().world, c, master_seed=0, workers=1)
+        choose_held_out_worlds(world, c, master_seed=0, workers=1)
     none = compose_config("synthesize.test_worlds.min_blocks=0").synthesize.test_worlds
-    assert choose_held_out_worlds(compose_config().world, none, master_seed=0) == []
+    assert choose_held_out_worlds(world, none, master_seed=0) == []

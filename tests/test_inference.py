@@ -112,6 +112,7 @@ def test_onnx_export_agrees_with_pytorch(model, tmp_path):
     assert difference < 1e-4
 
 
+@pytest.mark.slow(seconds=6)
 def test_predict_runs_the_exported_model_like_the_checkpoint(compose_config, trained, frames, tmp_path):
     folder = tmp_path / "images"
     folder.mkdir()

@@ -88,6 +88,7 @@ def test_odometry_topic_becomes_rectified_camera_poses(drive, rig, ingested):
     assert open_sequence(ingested / "drive").poses == pytest.approx(expected, abs=1e-6)
 
 
+@pytest.mark.slow(seconds=4)
 def test_labels_and_drift_of_an_ingested_bag_match_the_render(compose_config, drive, rig, ingested, labelled_drive, tmp_path):
     out = tmp_path / "labels"
     label(compose_config(f"label.in_dir={ingested}", f"label.out_dir={out}", f"label.metrics_path={tmp_path / 'm.json'}",

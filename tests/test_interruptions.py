@@ -152,6 +152,7 @@ if __name__ == "__main__":
 """
 
 
+@pytest.mark.slow(seconds=4)
 def test_a_worker_whose_parent_was_killed_while_it_started_does_not_do_its_job(tmp_path):
     script = tmp_path / "orphan.py"
     script.write_text(ORPHAN)

@@ -56,6 +56,7 @@ def test_shards_merge_into_what_one_run_writes(compose_config, three_drives, sin
     assert (tmp_path / "m.json").read_bytes() == (single_run / "m.json").read_bytes()
 
 
+@pytest.mark.slow(seconds=3)  # beside the merge test, which makes the shards it reads anyway
 def test_a_merge_of_shards_that_do_not_make_the_run_is_refused(compose_config, three_drives, shard_folders, tmp_path, capsys):
     partial = tmp_path / "partial"
     shutil.copytree(shard_folders / "0", partial / "0")

@@ -64,6 +64,7 @@ def test_frames_between_keyframes_follow_their_keyframe(compose_config, drive):
     assert errors.translation_drift_pct < 1.5 and 0.9 < errors.step_scale_ratio_min <= errors.step_scale_ratio_max < 1.2
 
 
+@pytest.mark.slow(seconds=4)
 def test_weak_steps_are_saved_by_more_features(compose_config, drive):
     """Four corners per bucket give fewer than 60 PnP inliers on some steps; the fallback's twelve do."""
     seq = open_sequence(drive / "drive")
@@ -76,6 +77,7 @@ def test_weak_steps_are_saved_by_more_features(compose_config, drive):
     assert plain.failed.any()  # the same steps without the fallback
 
 
+@pytest.mark.slow(seconds=7)
 def test_label_stage_writes_its_contract_and_tracks_it(compose_config, drive, tmp_path):
     metrics = label(label_config(compose_config, drive, tmp_path))
     out = tmp_path / "labels" / "drive"
@@ -137,6 +139,7 @@ def spoil(recordings: Path, frames: dict) -> None:
             cv2.imwrite(str(path), change(cv2.imread(str(path))))
 
 
+@pytest.mark.slow(seconds=6)
 def test_nearly_textureless_frames_are_skipped_without_failure(compose_config, drive, tmp_path):
     recordings = tmp_path / "recordings"
     shutil.copytree(drive, recordings)
@@ -152,6 +155,7 @@ def test_nearly_textureless_frames_are_skipped_without_failure(compose_config, d
     assert len(segments) >= 20 and all(0.98 < float(s["scale_ratio"]) < 1.02 for s in segments)
 
 
+@pytest.mark.slow(seconds=4)
 def test_frame_to_frame_drops_the_segments_over_a_dark_frame_with_the_reason(compose_config, drive, tmp_path):
     recordings = tmp_path / "recordings"
     shutil.copytree(drive, recordings)
@@ -222,6 +226,7 @@ def test_cli_exits_non_zero_with_one_line(drive, tmp_path):
     assert not (tmp_path / "labels").exists()
 
 
+@pytest.mark.slow(seconds=4)
 def test_odometry_on_the_real_kitti_snippet(compose_config, kitti_snippet):
     seq = open_sequence(kitti_snippet)
     run = run_odometry(seq, OdometryConfig(**compose_config().label.odometry))

@@ -34,6 +34,7 @@ def one_batch() -> tuple[torch.Tensor, torch.Tensor]:
 
 
 @pytest.mark.parametrize("model", list(MODELS))
+@pytest.mark.slow(seconds=4)
 def test_each_network_overfits_one_batch(compose_config, model):
     m = compose_config(f"model={model}").model
     torch.manual_seed(0)
@@ -55,6 +56,7 @@ def test_each_network_overfits_one_batch(compose_config, model):
     assert pooled(counts(predicted.numpy().astype(np.float32), targets.numpy())).iou > 0.8
 
 
+@pytest.mark.slow(seconds=4)
 def test_a_trained_unet_beats_the_mean_path_prior_on_the_held_out_frames(tiny_config, split_dir, tmp_path):
     from offroad_path.data.loading import load_labels, load_maps
     from offroad_path.train import train

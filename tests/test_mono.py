@@ -61,6 +61,7 @@ def test_the_sequence_command_accepts_a_mono_recording(drive, tmp_path):
         assert lines[1].startswith(f"{KITTI00_MONO}: 160 frames of one camera") and "117.2 m of poses" in lines[1]
 
 
+@pytest.mark.slow(seconds=4)
 def test_mono_labels_equal_stereo_labels_with_occlusion_off(compose_config, drive, tmp_path, caplog):
     """The same drive labelled from the same poses: without its right images, and with them but
     occlusion off. Every label is the same pixels; only the disparity is missing."""

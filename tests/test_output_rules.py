@@ -79,6 +79,7 @@ def test_predict_into_its_input_or_a_users_folder(compose_config, trained, frame
     refused(run_predict, cfg, capsys, tmp_path, "predict.out_dir", "overlaps the input" if where == "input" else "did not write")
 
 
+@pytest.mark.slow(seconds=4)
 def test_a_stale_temporary_folder_of_a_killed_run_is_removed(compose_config, recordings, tmp_path):
     stale = tmp_path / ".labels.tmp-999999999-abc"  # no such process
     stale.mkdir()

@@ -33,6 +33,7 @@ def stage_config(compose_config, cmd: str):
     return words[2].removeprefix("offroad_path."), compose_config(*words[3:])
 
 
+@pytest.mark.slow(seconds=4)
 def test_the_own_pipeline_writes_where_dvc_tracks_it(compose_config, own_stages):
     seeds = yaml.safe_load((ROOT / "conf" / "evaluate" / "default.yaml").read_text())["seeds"]
     expected = ["label", "split", *(f"train@{k}" for k in range(len(seeds))), *(f"postprocess@{k}" for k in range(len(seeds))), "evaluate"]

@@ -42,6 +42,7 @@ def edit_lock(repo, change) -> None:
     (repo / "dvc.lock").write_text(yaml.safe_dump(lock, sort_keys=False))
 
 
+@pytest.mark.slow(seconds=4)
 def test_a_stage_missing_from_the_lock_keeps_its_declared_outputs(repo):
     before = committed_metrics(repo)
     assert "metrics/evaluation.json" in before and "metrics/label.json" in before
@@ -53,6 +54,7 @@ def test_a_stage_missing_from_the_lock_keeps_its_declared_outputs(repo):
     assert committed_metrics(repo) == before
 
 
+@pytest.mark.slow(seconds=7)
 def test_a_committed_file_no_stage_declares_goes_and_yours_stays_unless_asked(repo, capsys):
     stale = repo / "metrics" / "steering" / "seed7.json"  # a seed the grid no longer trains
     stale.write_text("{}\n")

@@ -237,6 +237,7 @@ def limited(limit: int, module: str, *args: str, cwd: Path) -> subprocess.Comple
     return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=cwd)
 
 
+@pytest.mark.slow(seconds=6)
 def test_predict_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(trained, frames_folder, tmp_path):
     out = tmp_path / "out"
     run = limited(8192, "offroad_path.predict", f"predict.checkpoint={trained[0]}", f"predict.input={frames_folder}",
@@ -267,6 +268,7 @@ def test_ingest_onto_a_full_disk_fails_in_one_line_and_leaves_nothing(drive, rig
     assert not (tmp_path / "ingested").exists() or not list((tmp_path / "ingested").iterdir())  # no partial or temporary folder
 
 
+@pytest.mark.slow(seconds=5)
 def test_label_onto_a_full_disk_fails_in_one_line_naming_the_file_and_leaves_nothing(drive, tmp_path):
     """Once an error naming no file (the worker's OSError lost its path on the way back)."""
     out, metrics = tmp_path / "labels", tmp_path / "label.json"
@@ -385,6 +387,7 @@ def test_the_stereo_pair_of_a_bag_is_found_from_its_camera_infos(raw_drive, rig,
         assert opened.stereo_pair() == ("/stereo/left/image_raw", "/stereo/right/image_raw")
 
 
+@pytest.mark.slow(seconds=7)
 def test_evaluate_names_a_label_run_that_is_not_the_splits(compose_config, trained, split_dir, recordings, tmp_path, capsys):
     other = tmp_path / "other_labels"  # a label run of another recording name than the split's
     label(label_cfg(compose_config, recordings, tmp_path, f"label.out_dir={other}", "mlflow.enabled=false"))

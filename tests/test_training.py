@@ -81,6 +81,7 @@ def test_fine_tuning_from_the_world_loads_every_layer_of_the_path_network(compos
         from_path_network(build_model("unet", 8, 0.125), checkpoint, "unet", 0.125)
 
 
+@pytest.mark.slow(seconds=7)
 def test_resume_continues_the_step_count_and_mlflow_has_the_run(compose_config, split_dir, tmp_path, tiny_config):
     first = train(tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=1"))
     second = train(tiny_config(tmp_path, "model=fcn", "trainer.max_epochs=2"))
