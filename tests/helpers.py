@@ -183,7 +183,7 @@ def tiny_repo(repo: Path) -> Path:
     for item in ("conf", "src", "dvc.yaml", ".dvcignore"):
         (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, repo / item)
     # The tour's preset (conf/experiment/tour.yaml: 12 frames of two drives and a test world, one epoch),
-    # with one thread per stage, since two pipelines run at once (tests/test_pipeline_dvc.py).
+    # with one thread per stage, since two pipelines run at once (tests/repository/test_pipeline_dvc.py).
     tiny = yaml.safe_load((ROOT / "conf" / "experiment" / "tour.yaml").read_text()) | {"threads": 1, "experiment_name": "tiny"}
     del tiny["evaluate"]["architectures"]  # every network of the grid, as conf/evaluate/default.yaml lists them
     del tiny["mlflow"]  # the default experiment, which the notebooks read (their config is the checkout's)
@@ -245,7 +245,7 @@ def evaluate_config(compose_config, split_dir: Path, root: Path, *overrides: str
         f"evaluate.runs_dir={root / 'runs'}", f"evaluate.postprocessed_dir={root / 'post'}",
         f"evaluate.out_dir={root / 'evaluation'}", f"evaluate.metrics_path={root / 'metrics.json'}",
         f"evaluate.plots_dir={root / 'pr'}", f"mlflow.tracking_uri=sqlite:///{root / 'mlflow.db'}",
-        "evaluate.temporal.enabled=false",  # made-up maps, no networks to run on every frame (tests/test_temporal.py)
+        "evaluate.temporal.enabled=false",  # made-up maps, no networks to run on every frame (tests/evaluate/test_temporal.py)
         "split.block_m=1", *overrides,  # the split fixture's test set is one 4 m block: resampled in blocks of 1 m
     )  # fmt: skip
 

@@ -1,7 +1,7 @@
 """The code deps of each dvc.yaml stage, from the imports of its entry point, written into dvc.yaml:
 
     python tools/dvc_deps.py          # rewrite each stage's src/ deps in dvc.yaml
-    python tools/dvc_deps.py --check  # exit 1 when dvc.yaml differs (tests/test_dvc_deps.py)
+    python tools/dvc_deps.py --check  # exit 1 when dvc.yaml differs (tests/repository/test_dvc_deps.py)
 
 A stage depends on every module its `python -m offroad_path.<stage>` can import, directly or not,
 imports inside functions included: a missing dep would let `dvc repro` keep a stale output after a

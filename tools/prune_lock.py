@@ -6,7 +6,7 @@ that no stage of any dvc.yaml of the repository declares (outs, metrics, plots).
 
 `dvc repro` updates the entries of the stages it runs and keeps every other entry, so after a
 grid shrinks the lock pins stages that no longer exist and metrics/ keeps their files, which
-`dvc metrics show` lists as if current. tests/test_repository_state.py fails until this is run.
+`dvc metrics show` lists as if current. tests/repository/test_repository_state.py fails until this is run.
 
 What may go is decided from the pipelines' declarations, never from the lock: a stage missing from
 dvc.lock (not run yet, or a reset lock) keeps its outputs. A file git does not track (your notes)

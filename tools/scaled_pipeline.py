@@ -4,7 +4,7 @@
     dvc repro gpu/dvc.yaml             # the whole pipeline at the GPU preset's sizes
     dvc repro tour/dvc.yaml            # the five-minute tour: every stage on tiny worlds (a smoke run)
 
-One pipeline to edit (dvc.yaml); these files are made from it (tests/test_presets.py checks that they
+One pipeline to edit (dvc.yaml); these files are made from it (tests/config/test_presets.py checks that they
 are up to date): each stage runs in the checkout (wdir ..) with `experiment=<preset> paths.root=<folder>`,
 reads the checkout's code and configs and conf/experiment/<preset>.yaml, and writes <folder>/data/ and
 <folder>/metrics/, so the committed run stays as it is. The grid lists come from <folder>/params.yaml

@@ -10,7 +10,7 @@ from offroad_path.config.common import IMAGE_SIZE, PITCH
 from offroad_path.utils.rules import at_least, between, numbers, one_of, positive, rule, setting
 
 # The choices these schemas accept, each implemented by the module named beside it (which imports
-# its list from here; tests/test_config.py checks an implementation that keys a table by them).
+# its list from here; tests/config/test_config.py checks an implementation that keys a table by them).
 POSE_SOURCES = ("vo", "file")  # label.poses.source: label.labeller
 OCCLUSION_DEPTHS = ("stereo", "ground_truth")  # label.occlusion.depth: label.labeller
 ODOMETRY_METHODS = ("windowed", "frame_to_frame")  # label.odometry.method: odometry.sequence_trajectory.ESTIMATORS

@@ -14,7 +14,7 @@ from offroad_path.looks import axis_values
 from offroad_path.utils.rules import ConfigValueError, Rule, at_least, between, distinct, each, one_of, positive, setting
 
 # The report's condition groups, which synthesize.test_worlds.stress_sets name: world.groups.GROUPS's
-# keys, in order (tests/test_config.py checks that they agree).
+# keys, in order (tests/config/test_config.py checks that they agree).
 GROUP_KEYS = ("all", "shadow", "no_shadow", "water", "fork", "off_track", "paved", "dirt", "sharp_bend", "bend", "gentle",
               "shadow_water", "dappled", "grass_track", "no_track", "seen_look", "held_out_look", "outside_look")  # fmt: skip
 

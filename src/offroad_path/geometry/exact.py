@@ -4,7 +4,7 @@ NumPy's matmul, dot, 1-D norm and linalg call OpenBLAS, which picks its kernels 
 SkylakeX, Zen ...) at run time: products of the same arrays differ in the last bits between an AVX2
 and an AVX-512 machine. The renderer's pixels moved with them (`OPENBLAS_CORETYPE=Haswell` rendered
 other bytes on an AVX-512 machine), and so did the visual odometry's poses and with them the labels
-(tests/test_synthesize_stage.py, tests/test_label_stage.py). These sum the products one term at a
+(tests/synthesize/test_synthesize_stage.py, tests/label/test_label_stage.py). These sum the products one term at a
 time, in index order, with NumPy's elementwise multiply and add: no fused multiply-add, no blocking.
 NumPy's elementwise arithmetic and its reductions along an axis give the same bytes whatever its
 vector dispatch (AVX2, AVX-512): the tests run with it off.

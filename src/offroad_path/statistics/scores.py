@@ -7,7 +7,7 @@ the leading axes (a bootstrap's resamples, a matrix of image pairs), for NumPy a
 tensors alike; a score whose denominator is 0 is nan. Adding a score is this file alone: its
 function, its name in SCORES, and a title in TITLES when its name is not its column title. Every
 table, interval, metrics file and training log takes its scores from SCORES
-(tests/test_extending.py adds one and runs evaluate with it).
+(tests/stage/test_extending.py adds one and runs evaluate with it).
 """
 
 from __future__ import annotations

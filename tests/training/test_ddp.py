@@ -19,7 +19,7 @@ from helpers import saved_epochs
 
 from offroad_path.train import train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 # One training step an epoch over the tiny split's 6 training samples: 2 ranks x 3, or 1 x 6. No
 # augmentation and a U-Net (no dropout): what differs is batch norm's statistics, of each rank's 3
 # samples against all 6 (PyTorch's SyncBatchNorm, which trainer=ddp turns on, needs GPUs).

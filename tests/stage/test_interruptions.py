@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from helpers import dvc_command, saved_epochs, tagged_processes, tiny_repo
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def files(root: Path) -> dict[str, str]:
@@ -242,7 +242,7 @@ def test_training_killed_anywhere_then_resumed_ends_as_an_uninterrupted_run(spli
     expected = files(reference / "run")
     assert json.loads((reference / "run" / "metrics.json").read_text())["global_step"] > 0
     # (signal, epochs saved before it, then a delay): before any checkpoint, and mid-way through a
-    # later epoch (tests/test_ddp.py kills a run after its first epoch is saved)
+    # later epoch (tests/training/test_ddp.py kills a run after its first epoch is saved)
     points = [(signal.SIGKILL, 0, 2.0), (signal.SIGTERM, 3, 0.0)]
     for i, (how, epochs, delay) in enumerate(points):
         out = tmp_path / f"run{i}"

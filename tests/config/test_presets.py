@@ -148,7 +148,7 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
 
 def test_the_tour_is_every_stage_on_tiny_worlds_into_its_own_folder(compose_config):
     """tour/dvc.yaml: dvc.yaml's stages under experiment=tour (the suite's tiny repro runs the same
-    preset, tests/test_pipeline_dvc.py), outputs under tour/, an MLflow experiment of its own."""
+    preset, tests/repository/test_pipeline_dvc.py), outputs under tour/, an MLflow experiment of its own."""
     import yaml
     from scaled_pipeline import ROOT, render
 

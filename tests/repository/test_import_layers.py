@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parents[1] / "src" / "offroad_path"
+PACKAGE = Path(__file__).resolve().parents[2] / "src" / "offroad_path"
 STAGES = ["calibrate", "drive", "evaluate", "export", "ingest", "label", "postprocess", "predict", "pretrain", "split",
           "synthesize", "train", "train_steering"]  # fmt: skip
 LAYERS = [  # lowest first; a unit is a subpackage or a top-level module of offroad_path

@@ -1,6 +1,6 @@
 """The drive stage end to end on a small rendered test world: a trained path network, PilotNet and
 the built-in policies driven through every argument, the outputs of its contract, and bad input
-refused before anything is written (the same metrics from two places: tests/test_pipeline_dvc.py)."""
+refused before anything is written (the same metrics from two places: tests/repository/test_pipeline_dvc.py)."""
 
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from offroad_path.train import train
 from offroad_path.utils.atomic import MARKER, UnsafeOutputError, write_text_atomic
 from offroad_path.utils.outputs import Outputs, check_metrics_follow
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 # -- 1. Outputs never replace an input or a folder the project did not make ----------------------

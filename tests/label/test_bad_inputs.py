@@ -24,7 +24,7 @@ from offroad_path.pretrain import pretrain
 from offroad_path.train import train
 from offroad_path.utils.atomic import write_text_atomic
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 # -- 3. Worker processes: errors reach the parent, nothing hangs ------------------------------------

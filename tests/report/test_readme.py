@@ -11,7 +11,7 @@ import pytest
 
 from offroad_path.report.readme import BEGIN, END, generated, main, with_results
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def pages(readme: Path = ROOT / "README.md", results: Path = ROOT / "docs" / "results.md") -> list[str]:

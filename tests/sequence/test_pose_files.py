@@ -18,7 +18,7 @@ from helpers import command
 from offroad_path.errors import InputError
 from offroad_path.sequence.poses import max_steps, poses_to_text, read_poses
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def drive_poses(n: int = 20, step_m: float = 1.0) -> np.ndarray:

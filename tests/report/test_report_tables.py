@@ -9,7 +9,7 @@ from pathlib import Path
 from offroad_path.report.tables import grid, markdown_table
 from offroad_path.statistics.scores import Record
 
-PACKAGE = Path(__file__).resolve().parents[1] / "src" / "offroad_path"
+PACKAGE = Path(__file__).resolve().parents[2] / "src" / "offroad_path"
 BUILDER = PACKAGE / "report" / "tables.py"
 
 

@@ -18,7 +18,7 @@ from offroad_path.label import label
 from offroad_path.label.labeller import measured_depth
 from offroad_path.sequence import open_sequence
 
-KITTI00_MONO = Path(__file__).resolve().parents[2] / "shared" / "data" / "kitti00_mono"
+KITTI00_MONO = Path(__file__).resolve().parents[3] / "shared" / "data" / "kitti00_mono"
 
 
 def mono_copy(drive: Path, into: Path, one_row: bool = False) -> Path:

@@ -1,5 +1,5 @@
 """docs/extending.md's recipes, each done with a stand-in and run: a score is one entry in
-statistics/scores.py (tests/test_architectures.py does the same for a network)."""
+statistics/scores.py (tests/models/test_architectures.py does the same for a network)."""
 
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def test_a_look_value_added_to_the_names_and_the_table_is_drawn_and_rendered(com
     assert view.image.shape == (36, 64, 3) and (view.semantic == DIRT).any()  # the sand track is in view
 
 
-HELLO_STAGE = '''"""Stage `hello`: a stand-in stage (tests/test_extending.py) that writes a greeting."""
+HELLO_STAGE = '''"""Stage `hello`: a stand-in stage (tests/stage/test_extending.py) that writes a greeting."""
 
 from __future__ import annotations
 

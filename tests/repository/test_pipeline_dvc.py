@@ -17,7 +17,7 @@ from offroad_path.data.manifest import read_manifest
 from offroad_path.sequence import find_sequences
 
 # One of the three networks, to save the suite's time: the grid's stages and tables are the same
-# for any number (tests/test_architectures.py adds a fourth one; tests/test_evaluate_stage.py
+# for any number (tests/models/test_architectures.py adds a fourth one; tests/evaluate/test_evaluate_stage.py
 # compares networks).
 GRID = ("unet",)
 
@@ -160,7 +160,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
 def test_the_gpu_pipeline_runs_its_stages_into_gpu(tmp_path):
     """gpu/dvc.yaml (experiment=gpu, made from dvc.yaml) on the tiny preset in a copy: its stages up to the
     split run in the checkout and write under gpu/ only, never into the laptop's data/ or metrics/ (the
-    later stages' paths: tests/test_presets.py checks the file is dvc.yaml's stages under gpu/)."""
+    later stages' paths: tests/config/test_presets.py checks the file is dvc.yaml's stages under gpu/)."""
     repo = tiny_repo(tmp_path / "repo")
     shutil.copytree(ROOT / "gpu", repo / "gpu")
     # the copy's GPU preset is the tiny one (the real one's sizes are for a GPU): what runs here is the pipeline file

@@ -23,7 +23,7 @@ from offroad_path.recordings.bags import decode_image
 from offroad_path.recordings.rig_calibration import read_rig
 
 LEFT, RIGHT = "/stereo/left/image_raw", "/stereo/right/image_raw"
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
