@@ -78,10 +78,11 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
             OPEN_RUNS.pop(run.info.run_id, None)
 
 
-def end_open_runs_killed(timeout_s: float = 5.0) -> None:
+def end_open_runs_killed(timeout_s: float = 15.0) -> None:
     """On a stop: every run this process has open ends KILLED, and so does the `dvc repro` parent
     of each (the repro stopped with it). In a thread given timeout_s, from the signal handler: a store
-    the stop caught in the middle of a write must not keep the stopped process alive."""
+    the stop caught in the middle of a write must not keep the stopped process alive. The bound is
+    generous: on 2 cores shared with other busy processes, the three store calls once took over 5 s."""
     if not OPEN_RUNS:
         return
     import threading
