@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -58,6 +60,28 @@ def flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
 
 
 @contextlib.contextmanager
+def stop_deferred() -> Iterator[None]:
+    """A SIGTERM that arrives inside the block is handled when it ends (by the handler installed
+    before it), not in the middle: MLflow's run is in the store before start_run returns, and a stop
+    caught in between left it RUNNING for good. Outside the main thread (where no handler can be
+    set), the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    handler = signal.getsignal(signal.SIGTERM)
+    caught: list[int] = []
+    signal.signal(signal.SIGTERM, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, handler)
+        if caught and callable(handler):
+            handler(caught[0], None)
+        elif caught and handler == signal.SIG_DFL:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+
+@contextlib.contextmanager
 def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
     """An MLflow run for one stage with its resolved config as parameters; None when disabled."""
     if not cfg.mlflow.enabled:
@@ -68,8 +92,10 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
     mlflow.set_tracking_uri(tracking_uri(cfg.mlflow))
     experiment = experiment_id(cfg.mlflow)
     parent = pipeline_parent(cfg)
-    with mlflow.start_run(experiment_id=experiment, run_name=stage, tags={"mlflow.parentRunId": parent} if parent else None) as run:
-        OPEN_RUNS[run.info.run_id] = tracking_uri(cfg.mlflow)
+    with stop_deferred():  # a stop that lands while MLflow makes the run must find it among the open runs
+        started = mlflow.start_run(experiment_id=experiment, run_name=stage, tags={"mlflow.parentRunId": parent} if parent else None)
+        OPEN_RUNS[started.info.run_id] = tracking_uri(cfg.mlflow)
+    with started as run:
         try:
             mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
             mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
@@ -78,14 +104,12 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
             OPEN_RUNS.pop(run.info.run_id, None)
 
 
-def end_open_runs_killed(timeout_s: float = 15.0) -> None:
+def end_open_runs_killed(timeout_s: float = 5.0) -> None:
     """On a stop: every run this process has open ends KILLED, and so does the `dvc repro` parent
     of each (the repro stopped with it). In a thread given timeout_s, from the signal handler: a store
-    the stop caught in the middle of a write must not keep the stopped process alive. The bound is
-    generous: on 2 cores shared with other busy processes, the three store calls once took over 5 s."""
+    the stop caught in the middle of a write must not keep the stopped process alive."""
     if not OPEN_RUNS:
         return
-    import threading
 
     def end() -> None:
         from mlflow.tracking import MlflowClient
