@@ -168,27 +168,38 @@ def run_stage(stage: Stage, cfg: DictConfig) -> Any:
 def check_root(cfg: DictConfig) -> None:
     """paths.root names a folder: an empty one (`paths.root=$ROOT` with ROOT unset) would put every output
     into this checkout's data/ and metrics/, over the committed run's. With `paths=own` (your data), the
-    root and the folders it implies must lie outside this checkout, through links too (the committed
-    runs own what is in it), but for the checkout's own pipeline of your data run by DVC (own/dvc.yaml)."""
+    root and the folders it implies must lie outside this checkout and any other checkout of the
+    project, through links too (the committed runs own what is in them), but for a checkout's own
+    pipeline of your data run by DVC (own/dvc.yaml)."""
     root = OmegaConf.select(cfg, "paths.root", throw_on_missing=False)
     if isinstance(root, str) and not root.strip():
         raise InputError("paths.root", "is empty: give a folder of yours (paths.root=DIR; the checkout's own run: paths.root=.)")
     if not isinstance(root, str) or paths_choice() != "own":
         return
-    checkout = CONF_DIR.parent.resolve()
     pipeline = os.environ.get("DVC_STAGE", "").partition(":")[0]  # DVC names the stage it runs: own/dvc.yaml:label
-    inside = not Path(pipeline).is_absolute() and ".." not in Path(pipeline).parts  # a pipeline of this checkout's own
-    if inside and pipeline.endswith("dvc.yaml") and (checkout / pipeline).parent.resolve() == Path(root).resolve():
-        return
+    inside = not Path(pipeline).is_absolute() and ".." not in Path(pipeline).parts  # a pipeline of the checkout's own
     for key in ("root", "data_dir", "metrics_dir"):
         folder = Path(cfg.paths[key]).resolve()
+        # this checkout, or another checkout of the project the folder lies in (the package may be
+        # installed from elsewhere): either's committed runs own what is in it
+        checkout = CONF_DIR.parent.resolve()
+        if folder != checkout and checkout not in folder.parents and folder not in checkout.parents:
+            checkout = next((f for f in (folder, *folder.parents) if is_checkout(f)), checkout)
+        if inside and pipeline.endswith("dvc.yaml") and (checkout / pipeline).parent.resolve() == Path(root).resolve():
+            continue
         where = "is" if folder == checkout else "is inside" if checkout in folder.parents else "holds" if folder in checkout.parents else ""
         if where:
+            this = "this checkout" if checkout == CONF_DIR.parent.resolve() else "a checkout of this project"
             raise InputError(
                 f"paths.{key}",
-                f"{cfg.paths[key]} resolves to {folder}, which {where} this checkout ({checkout}): with paths=own every output "
+                f"{cfg.paths[key]} resolves to {folder}, which {where} {this} ({checkout}): with paths=own every output "
                 "goes to a folder of yours outside the checkout (its committed runs own what is in it)",
             )
+
+
+def is_checkout(folder: Path) -> bool:
+    """A checkout of this project: its pipeline, its config and its code."""
+    return (folder / "dvc.yaml").is_file() and (folder / "conf" / "config.yaml").is_file() and (folder / "src" / "offroad_path").is_dir()
 
 
 def paths_choice() -> str | None:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from helpers import label_cfg, refused, user_folder
+from helpers import command, label_cfg, refused, snapshot, user_folder
 
 from offroad_path.evaluate import evaluate
 from offroad_path.export import run_export
@@ -293,3 +293,18 @@ def test_written_files_and_folders_take_the_users_umask(tmp_path, umask):
         os.umask(old)
     assert (tmp_path / "metrics.json").stat().st_mode & 0o777 == 0o666 & ~umask
     assert (tmp_path / "out").stat().st_mode & 0o777 == 0o777 & ~umask
+
+
+def test_paths_own_in_another_checkout_of_the_project_is_refused(tmp_path):
+    """With the package installed from one checkout, `paths=own paths.root=.` run in a second one wrote
+    into the second's committed metrics: the rule knew only the checkout the code runs from."""
+    second = tmp_path / "second"
+    for item in ("conf", "metrics", "dvc.yaml"):
+        (shutil.copytree if (ROOT / item).is_dir() else shutil.copy)(ROOT / item, second / item)
+    (second / "src" / "offroad_path").mkdir(parents=True)
+    before = snapshot(second)
+    run = command("offroad_path.label", "paths=own", "paths.root=.", "mlflow.enabled=false", cwd=second)
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1, run.stderr
+    assert lines[0].startswith(f"error: paths.root: . resolves to {second}, which is a checkout of this project ({second})"), lines[0]
+    assert snapshot(second) == before
