@@ -36,10 +36,10 @@ def snapshot(root: Path) -> dict[str, str]:
 
 
 def command(module: str, *args: object, cwd: Path | None = None, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    """`python -m MODULE ARGS` (or `python SCRIPT.py ARGS`) run in this process, answered as subprocess.run answers: the exit
-    status and what it printed. Its imports are already made, so it takes about 2 s less than a
-    command of its own; for every test whose subject is not the process (signals, kill, imports,
-    CPU kernel sets and other environments keep subprocess.run)."""
+    """`python -m MODULE ARGS` (or `python SCRIPT.py ARGS`) run in this process, answered as
+    subprocess.run answers: the exit status and what it printed. Its imports are already made, so it
+    takes about 2 s less than a command of its own. For every test whose subject is not the process;
+    signals, kills, imports, CPU kernel sets and other environments keep subprocess.run."""
     argv, here, environ, on_sigterm = sys.argv[:], os.getcwd(), dict(os.environ), signal.getsignal(signal.SIGTERM)
     root = logging.getLogger()
     handlers, level = root.handlers[:], root.level  # Hydra configures logging for its job; pytest's caplog is a root handler
