@@ -23,20 +23,13 @@ from offroad_path.config import load_config
 from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.odometry.sequence_trajectory import drift, run_odometry
 from offroad_path.sequence import open_sequence
-from offroad_path.sequence.calibration import StereoCalibration
+from offroad_path.sequence.calibration import jittered
 from offroad_path.sequence.reader import Sequence
 
 
 def perturbed(sequence: Sequence, scale: float, rng: np.random.Generator) -> Sequence:
     """`sequence` with its intrinsics and baseline each scaled by 1 +- a relative amount up to `scale`."""
-
-    def factor() -> float:
-        return 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(1e-8, scale)
-
-    K = sequence.calibration.K.copy()
-    K[0, 0], K[1, 1], K[0, 2], K[1, 2] = K[0, 0] * factor(), K[1, 1] * factor(), K[0, 2] * factor(), K[1, 2] * factor()
-    calibration = StereoCalibration.from_intrinsics(K, sequence.calibration.baseline_m * factor())
-    return dataclasses.replace(sequence, calibration=calibration)
+    return dataclasses.replace(sequence, calibration=jittered(sequence.calibration, scale, rng))
 
 
 def drift_pct(sequence: Sequence, cfg: OdometryConfig) -> float:

@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 
 from offroad_path.config.label_schema import OdometryConfig
+from offroad_path.geometry.exact import matmul, solve
 from offroad_path.sequence.calibration import StereoCalibration
 
 
@@ -23,7 +24,9 @@ class FrontEnd:
         # disparity, and right-image rows below the left's. They move the right camera's principal
         # point to (cx - disparity_offset, cy + row_offset).
         self.disparity_offset, self.row_offset = 0.0, 0.0
-        criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+        # Lucas-Kanade stops when a step is under 1e-4 px (OpenCV squares the epsilon), not 0.01: a
+        # track then ends where the image says, not where the start happened to leave it.
+        criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
         self.lk = {"winSize": (cfg.lk_window, cfg.lk_window), "maxLevel": cfg.lk_levels, "criteria": criteria}
 
     def corners(self, image: np.ndarray, max_features: int, quality: float, taken: np.ndarray | None = None) -> np.ndarray:
@@ -103,7 +106,13 @@ class FrontEnd:
         return left, right
 
     def pnp(self, xyz: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
-        """RANSAC PnP: (the 4x4 transform taking xyz's frame into the camera, or None; inlier mask)."""
+        """PnP: (the 4x4 transform taking xyz's frame into the camera, or None; inlier mask).
+
+        RANSAC finds the pose; the robust refinement (`_robust_pose`) moves it to the minimum of a
+        smooth loss over all points, and the inliers are the points within the RANSAC threshold of
+        that pose. Where the refined pose keeps fewer than min_inliers and RANSAC's more, RANSAC's
+        consensus stands: the step is weak, but it is not made a failure.
+        """
         keep = np.zeros(len(xyz), bool)
         if len(xyz) < 6:
             return None, keep
@@ -119,7 +128,64 @@ class FrontEnd:
         )
         if not found or inliers is None:
             return None, keep
-        keep[inliers[:, 0]] = True
         transform = np.eye(4)
         transform[:3, :3], transform[:3, 3] = cv2.Rodrigues(rvec)[0], tvec[:, 0]
-        return transform, keep
+        keep[inliers[:, 0]] = True
+        robust = self._robust_pose(transform, xyz.astype(np.float64), uv.astype(np.float64))
+        robust_keep = self._reprojection_error(robust, xyz, uv) < self.cfg.ransac_reprojection_px
+        if robust_keep.sum() < min(self.cfg.min_inliers, keep.sum()):  # a weak view: RANSAC's consensus, not a failed step
+            return transform, keep
+        return robust, robust_keep
+
+    def _reprojection_error(self, transform: np.ndarray, xyz: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(N,) left-image distance in pixels between xyz seen from `transform` and uv."""
+        p = matmul(xyz, transform[:3, :3].T) + transform[:3, 3]
+        z = np.maximum(p[:, 2], 1e-6)
+        return np.hypot(self.fx * p[:, 0] / z + self.cx - uv[:, 0], self.fy * p[:, 1] / z + self.cy - uv[:, 1])
+
+    def _robust_pose(self, transform: np.ndarray, xyz: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """The pose minimising a Cauchy loss of every point's reprojection error, from RANSAC's pose.
+
+        RANSAC's answer is a discrete choice: which sample won, which points fell under the
+        threshold. A change of the inputs far below the image noise (a calibration rounded to
+        float32, a track moved by a thousandth of a pixel) can flip it and move the pose by
+        centimetres. The minimum of a smooth loss over all points moves only as much as its inputs
+        did, so RANSAC only picks the basin; Gauss-Newton with Cauchy weights (scale: the RANSAC
+        threshold, so outliers fade out smoothly) converges to the minimum in it.
+        """
+        c2 = self.cfg.ransac_reprojection_px**2
+        for _ in range(_ROBUST_ITERATIONS):
+            p = matmul(xyz, transform[:3, :3].T) + transform[:3, 3]  # (N, 3) in the camera
+            x, y, z = p.T
+            if np.any(z <= 0):
+                break
+            iz = 1.0 / z
+            r = np.concatenate([self.fx * x * iz + self.cx - uv[:, 0], self.fy * y * iz + self.cy - uv[:, 1]])  # (2N,)
+            zero = np.zeros_like(z)
+            du = np.stack([self.fx * iz, zero, -self.fx * x * iz * iz], axis=1)  # (N, 3) d(u)/d(point)
+            dv = np.stack([zero, self.fy * iz, -self.fy * y * iz * iz], axis=1)
+            J = np.concatenate([twist_jacobian(du, p), twist_jacobian(dv, p)])  # (2N, 6)
+            n = len(z)
+            weight = np.tile(1.0 / (1.0 + (r[:n] ** 2 + r[n:] ** 2) / c2), 2)  # per point, on both rows
+            # J^T W J and J^T W r as sums over the rows, in row order: no BLAS (geometry.exact)
+            H = (J[:, :, None] * (J * weight[:, None])[:, None, :]).sum(axis=0)  # (6, 6)
+            g = (J * (weight * r)[:, None]).sum(axis=0)  # (6,)
+            try:
+                delta = -solve(H, g)
+            except np.linalg.LinAlgError:
+                break
+            update = np.eye(4)
+            update[:3, :3], update[:3, 3] = cv2.Rodrigues(delta[3:])[0], delta[:3]
+            transform = matmul(update, transform)
+            if np.abs(delta).max() < 1e-12:
+                break
+        return transform
+
+
+# Gauss-Newton steps of the robust PnP at most; it converges in far fewer from RANSAC's pose.
+_ROBUST_ITERATIONS = 50
+
+
+def twist_jacobian(d_point: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Chain a residual's gradient w.r.t. the point (N, 3) through p' = p + w x p + t: (N, 6)."""
+    return np.concatenate([d_point, np.cross(p, d_point)], axis=1)

@@ -18,7 +18,7 @@ import numpy as np
 
 from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.geometry.exact import matmul, rigid_inverse, solve
-from offroad_path.odometry.features import FrontEnd
+from offroad_path.odometry.features import FrontEnd, twist_jacobian
 from offroad_path.odometry.steps import StepResult
 from offroad_path.sequence.calibration import StereoCalibration
 
@@ -120,7 +120,7 @@ class FrameToFrameOdometry:
             du = np.stack([self.fx * iz, np.zeros_like(z), -self.fx * x * iz * iz], axis=1)
             dv = np.stack([np.zeros_like(z), self.fy * iz, -self.fy * y * iz * iz], axis=1)
             dur = du + np.stack([np.zeros_like(z), np.zeros_like(z), fb * iz * iz], axis=1)
-            jac = [_twist_jacobian(du, p), _twist_jacobian(dv, p), _twist_jacobian(dur[has_right], p[has_right])]
+            jac = [twist_jacobian(du, p), twist_jacobian(dv, p), twist_jacobian(dur[has_right], p[has_right])]
             r = np.concatenate(res)
             J = np.concatenate(jac)
             weight = np.where(np.abs(r) <= self.cfg.huber_px, 1.0, self.cfg.huber_px / np.abs(r))
@@ -138,8 +138,3 @@ class FrameToFrameOdometry:
             if np.linalg.norm(delta) < 1e-8:
                 break
         return motion
-
-
-def _twist_jacobian(d_point: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Chain a residual's gradient w.r.t. the point (N, 3) through p' = p + w x p + t: (N, 6)."""
-    return np.concatenate([d_point, np.cross(p, d_point)], axis=1)
