@@ -21,9 +21,9 @@ from omegaconf import OmegaConf
 
 from offroad_path.config import load_config
 from offroad_path.config.label_schema import OdometryConfig
+from offroad_path.odometry.perturb import jittered
 from offroad_path.odometry.sequence_trajectory import drift, run_odometry
 from offroad_path.sequence import open_sequence
-from offroad_path.sequence.calibration import jittered
 from offroad_path.sequence.reader import Sequence
 
 

@@ -12,9 +12,10 @@ import pytest
 
 from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.odometry.features import FrontEnd
+from offroad_path.odometry.perturb import jittered
 from offroad_path.odometry.sequence_trajectory import drift, run_odometry
 from offroad_path.sequence import open_sequence
-from offroad_path.sequence.calibration import StereoCalibration, jittered
+from offroad_path.sequence.calibration import StereoCalibration
 
 K = np.array([[700.0, 0.0, 320.0], [0.0, 700.0, 180.0], [0.0, 0.0, 1.0]])
 

@@ -1,6 +1,9 @@
 """Poses with a controlled odometry error, for measuring how much of it the labels tolerate
-(benchmarks/label_noise.py). The study asks what an odometry worse than this project's windowed VO
-(0.3 to 1.1 % drift over 20 m segments on its world) costs; the paper reports no drift figure for
+(benchmarks/label_noise.py); and calibrations jittered far below their precision, for measuring how
+much the odometry's answer moves with them (`jittered`, benchmarks/calibration_sensitivity.py).
+
+The label-noise study asks what an odometry worse than this project's windowed VO (its drift over 20
+m segments on the world is in metrics/label.json) costs; the paper reports no drift figure for
 its libviso2 (about 2 % is a KITTI benchmark figure, not the paper's).
 
 Each step's true relative motion keeps its rotation; its length is scaled by 1 + s and the heading
@@ -27,6 +30,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from offroad_path.sequence.calibration import StereoCalibration
 
 SEGMENT_M = 20.0
 
@@ -105,3 +110,16 @@ def erroneous_poses(poses: np.ndarray, error: PoseError, seed: int = 0, correlat
     for r in np.linspace(0, len(result), error.resets + 2)[1:-1].astype(int):
         result[r:] = result[0] @ np.linalg.inv(result[r]) @ result[r:]
     return result
+
+
+def jittered(calibration: StereoCalibration, scale: float, rng: np.random.Generator) -> StereoCalibration:
+    """`calibration` with fx, fy, cx, cy and the baseline each scaled by 1 + s r, r uniform in
+    [1e-8, scale] and s a random sign: a change far below what any calibration is known to, for
+    measuring how much an estimator's answer moves with it."""
+
+    def factor() -> float:
+        return 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(1e-8, scale)
+
+    K = calibration.K.copy()
+    K[0, 0], K[1, 1], K[0, 2], K[1, 2] = K[0, 0] * factor(), K[1, 1] * factor(), K[0, 2] * factor(), K[1, 2] * factor()
+    return StereoCalibration.from_intrinsics(K, calibration.baseline_m * factor())

@@ -43,19 +43,6 @@ class StereoCalibration:
         return cls(P_left, P_right)
 
 
-def jittered(calibration: StereoCalibration, scale: float, rng: np.random.Generator) -> StereoCalibration:
-    """`calibration` with fx, fy, cx, cy and the baseline each scaled by 1 + s r, r uniform in
-    [1e-8, scale] and s a random sign: a change far below what any calibration is known to, for
-    measuring how much an estimator's answer moves with it."""
-
-    def factor() -> float:
-        return 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(1e-8, scale)
-
-    K = calibration.K.copy()
-    K[0, 0], K[1, 1], K[0, 2], K[1, 2] = K[0, 0] * factor(), K[1, 1] * factor(), K[0, 2] * factor(), K[1, 2] * factor()
-    return StereoCalibration.from_intrinsics(K, calibration.baseline_m * factor())
-
-
 def read_calibration(path: Path, keys: tuple[str, str] | None, mono: bool = False) -> StereoCalibration:
     """Parse and check a rectified stereo calib.txt; `keys` picks keyed rows (e.g. P2, P3). For a
     `mono` recording one unkeyed (left) row is enough; two rows are read and checked as for stereo."""
