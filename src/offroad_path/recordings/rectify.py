@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from offroad_path.geometry.exact import matmul
 from offroad_path.recordings.rig_calibration import CameraModel, StereoRig
 from offroad_path.sequence.calibration import StereoCalibration
 
@@ -50,6 +51,9 @@ class Rectifier:
                 alpha=alpha,
                 newImageSize=output_size,
             )
+            # OpenCV computes the new principal points from float32 pixels (cx, cy rounded to
+            # float32, and fx off by about 2e-8 of itself with them); the same definition in float64.
+            P1, P2 = rectified_projections(((left, R1), (right, R2)), matmul(R2, T), input_size, output_size, alpha)
             undistort = cv2.initUndistortRectifyMap
         self.maps = [undistort(cam.K, cam.D, Ri, Pi, output_size, cv2.CV_16SC2) for cam, Ri, Pi in ((left, R1, P1), (right, R2, P2))]
         self.R_left, self.R_right = R1, R2  # (3, 3): a point in the raw camera, in the rectified camera
@@ -64,6 +68,63 @@ class Rectifier:
         """How much further down the rectified optical axis points than the raw left camera's."""
         axis = self.R_left[2]  # the rectified z axis in raw left coordinates
         return math.degrees(math.atan2(axis[1], axis[2]))
+
+
+def rectified_projections(
+    views: tuple[tuple[CameraModel, np.ndarray], tuple[CameraModel, np.ndarray]],
+    t_rectified: np.ndarray,
+    input_size: tuple[int, int],
+    output_size: tuple[int, int],
+    alpha: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rectified cameras' 3x4 projections (P1, P2) as cv2.stereoRectify defines them for a
+    horizontal rig with CALIB_ZERO_DISPARITY, computed in float64 throughout.
+
+    The focal length is the cameras' mean fy scaled to the output height; the principal point
+    centres the undistorted, rotated image corners (the mean over both cameras); `alpha` then scales
+    the focal length between keeping only valid pixels (0) and every source pixel (1), judged on
+    the undistorted image border. `views`: (left camera, its rectifying rotation R1) and (right
+    camera, R2); t_rectified (3, 1): the rig's translation in the rectified frame, R2 T.
+    """
+    (nx, ny), (new_w, new_h) = input_size, output_size
+    fc = (views[0][0].K[1, 1] + views[1][0].K[1, 1]) * new_h / ny / 2
+    corners = np.array([[0, 0], [nx - 1, 0], [0, ny - 1], [nx - 1, ny - 1]], np.float64)
+    centres = []
+    for camera, R in views:
+        normal = cv2.undistortPoints(corners[:, None], camera.K, camera.D)[:, 0]  # (4, 2) on the plane z = 1
+        rotated = matmul(np.concatenate([normal, np.ones((4, 1))], axis=1), R.T)  # (4, 3)
+        projected = fc * rotated[:, :2] / rotated[:, 2:]
+        centres.append([(nx - 1) / 2 - projected[:, 0].mean(), (ny - 1) / 2 - projected[:, 1].mean()])
+    cx0, cy0 = np.mean(centres, axis=0)  # zero disparity: one principal point for both
+    P = np.array([[fc, 0.0, cx0, 0.0], [0.0, fc, cy0, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    cx, cy = new_w * cx0 / nx, new_h * cy0 / ny
+    s = 1.0
+    if alpha >= 0:
+        alpha = min(alpha, 1.0)
+        inner_scales, outer_scales = [], []
+        for camera, R in views:
+            inner, outer = _undistorted_border(camera, R, P, input_size)
+            for rect, scales in ((inner, inner_scales), (outer, outer_scales)):
+                x0, y0, x1, y1 = rect
+                scales.append([cx / (cx0 - x0), cy / (cy0 - y0), (new_w - 1 - cx) / (x1 - cx0), (new_h - 1 - cy) / (y1 - cy0)])
+        s = max(map(max, inner_scales)) * (1 - alpha) + min(map(min, outer_scales)) * alpha
+    P1 = np.array([[fc * s, 0.0, cx, 0.0], [0.0, fc * s, cy, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    P2 = P1.copy()
+    P2[0, 3] = float(t_rectified[0, 0]) * fc * s  # -baseline times the focal length
+    return P1, P2
+
+
+def _undistorted_border(camera: CameraModel, R: np.ndarray, P: np.ndarray, size: tuple[int, int]) -> tuple[tuple[float, ...], ...]:
+    """((x0, y0, x1, y1) of the largest rectangle inside, and of the smallest around) a 9 x 9 grid
+    over the image, corner pixel to corner pixel, undistorted into P: this OpenCV's rectangles to
+    float32 rounding (tests/recordings/test_rectify.py)."""
+    w, h = size
+    xs, ys = np.meshgrid(np.arange(9) * (w - 1) / 8, np.arange(9) * (h - 1) / 8)  # (9, 9) each
+    grid = np.stack([xs, ys], axis=-1).reshape(-1, 1, 2)
+    p = cv2.undistortPoints(grid, camera.K, camera.D, R=R, P=P[:, :3]).reshape(9, 9, 2)  # [row, column]
+    inner = (p[:, 0, 0].max(), p[0, :, 1].max(), p[:, -1, 0].min(), p[-1, :, 1].min())
+    outer = (p[..., 0].min(), p[..., 1].min(), p[..., 0].max(), p[..., 1].max())
+    return inner, outer
 
 
 class Undistorter:
