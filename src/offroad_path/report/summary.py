@@ -100,7 +100,7 @@ def results_markdown(  # noqa: PLR0913
 def _timing_sentence(timing: dict) -> str:
     minutes, seconds = divmod(round(timing["total_s"]), 60)
     return (
-        f"Time: this `dvc repro` took {minutes} min {seconds} s from nothing on a {timing['machine']} "
+        f"Time: the last `dvc repro` from nothing took {minutes} min {seconds} s on a {timing['machine']} "
         f"(`metrics/pipeline_time.json`, written by `python benchmarks/pipeline_time.py --json`, with every stage's seconds).\n"
     )
 
