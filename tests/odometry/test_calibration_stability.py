@@ -77,7 +77,7 @@ def test_pnp_moves_as_little_as_the_calibration_did(scene, odometry):
     assert np.abs(given[:3, 3] - truth[:3, 3]).max() < 0.01
 
 
-@pytest.mark.slow(seconds=20)
+@pytest.mark.slow(seconds=14)
 def test_the_drift_on_the_real_snippet_holds_when_the_calibration_moves_by_1e_7(odometry, kitti_snippet):
     """On the real KITTI snippet the label stage's drift moved by up to 0.03 points under such
     changes (RANSAC's choices re-drawn); it now moves by under 0.005."""
@@ -89,6 +89,6 @@ def test_the_drift_on_the_real_snippet_holds_when_the_calibration_moves_by_1e_7(
 
     given = drift_pct(sequence)
     rng = np.random.default_rng(0)
-    for _ in range(3):
+    for _ in range(2):
         moved = drift_pct(dataclasses.replace(sequence, calibration=jittered(sequence.calibration, 1e-7, rng)))
         assert abs(moved - given) < 0.005

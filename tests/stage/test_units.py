@@ -74,6 +74,7 @@ class FrontEndSettings:
     forward_backward_px: float = 1.0
     ransac_iterations: int = 200
     ransac_reprojection_px: float = 1.0
+    min_inliers: int = 40
 
 
 def front_end():
@@ -108,7 +109,7 @@ def test_the_front_end_recovers_a_known_camera_motion_by_pnp():
     uv[:8] += 25.0  # outliers
     found, inliers = front.pnp(points, uv)
     assert found is not None and inliers[8:].all() and not inliers[:8].any()
-    np.testing.assert_allclose(found, motion, atol=1e-3)
+    np.testing.assert_allclose(found, motion, atol=1e-4)  # float32 pixels, no noise: the refined pose is the true one
 
 
 def test_a_checkpoint_round_trips_and_a_pickled_object_or_a_truncated_file_is_refused(tmp_path):
