@@ -167,16 +167,10 @@ class FrontEnd:
             J = np.concatenate([twist_jacobian(du, p), twist_jacobian(dv, p)])  # (2N, 6)
             n = len(z)
             weight = np.tile(1.0 / (1.0 + (r[:n] ** 2 + r[n:] ** 2) / c2), 2)  # per point, on both rows
-            # J^T W J and J^T W r as sums over the rows, in row order: no BLAS (geometry.exact)
-            H = (J[:, :, None] * (J * weight[:, None])[:, None, :]).sum(axis=0)  # (6, 6)
-            g = (J * (weight * r)[:, None]).sum(axis=0)  # (6,)
-            try:
-                delta = -solve(H, g)
-            except np.linalg.LinAlgError:
+            step = weighted_step(transform, J, weight, r)
+            if step is None:
                 break
-            update = np.eye(4)
-            update[:3, :3], update[:3, 3] = cv2.Rodrigues(delta[3:])[0], delta[:3]
-            transform = matmul(update, transform)
+            transform, delta = step
             if np.abs(delta).max() < 1e-12:
                 break
         return transform
@@ -184,6 +178,22 @@ class FrontEnd:
 
 # Gauss-Newton steps of the robust PnP at most; it converges in far fewer from RANSAC's pose.
 _ROBUST_ITERATIONS = 50
+
+
+def weighted_step(transform: np.ndarray, J: np.ndarray, weight: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """One weighted Gauss-Newton step on a 4x4 transform, left-multiplied: (the new transform, the
+    twist (6,) it took), or None when J^T W J is singular. J (M, 6): the residuals' twist Jacobian;
+    weight, r (M,)."""
+    # J^T W J and J^T W r as sums over the rows, in row order: no BLAS (geometry.exact)
+    H = (J[:, :, None] * (J * weight[:, None])[:, None, :]).sum(axis=0)  # (6, 6)
+    g = (J * (weight * r)[:, None]).sum(axis=0)  # (6,)
+    try:
+        delta = -solve(H, g)
+    except np.linalg.LinAlgError:
+        return None
+    update = np.eye(4)
+    update[:3, :3], update[:3, 3] = cv2.Rodrigues(delta[3:])[0], delta[:3]
+    return matmul(update, transform), delta
 
 
 def twist_jacobian(d_point: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -17,8 +17,8 @@ import cv2
 import numpy as np
 
 from offroad_path.config.label_schema import OdometryConfig
-from offroad_path.geometry.exact import matmul, rigid_inverse, solve
-from offroad_path.odometry.features import FrontEnd, twist_jacobian
+from offroad_path.geometry.exact import matmul, rigid_inverse
+from offroad_path.odometry.features import FrontEnd, twist_jacobian, weighted_step
 from offroad_path.odometry.steps import StepResult
 from offroad_path.sequence.calibration import StereoCalibration
 
@@ -124,17 +124,10 @@ class FrameToFrameOdometry:
             r = np.concatenate(res)
             J = np.concatenate(jac)
             weight = np.where(np.abs(r) <= self.cfg.huber_px, 1.0, self.cfg.huber_px / np.abs(r))
-            # J^T W J and J^T W r as sums over the rows, in row order: no BLAS (geometry.exact)
-            H = (J[:, :, None] * (J * weight[:, None])[:, None, :]).sum(axis=0)  # (6, 6)
-            g = (J * (weight * r)[:, None]).sum(axis=0)  # (6,)
-            try:
-                delta = -solve(H, g)
-            except np.linalg.LinAlgError:
+            step = weighted_step(motion, J, weight, r)
+            if step is None:
                 break
-            update = np.eye(4)
-            update[:3, :3] = cv2.Rodrigues(delta[3:])[0]
-            update[:3, 3] = delta[:3]
-            motion = matmul(update, motion)
+            motion, delta = step
             if np.linalg.norm(delta) < 1e-8:
                 break
         return motion
