@@ -1,6 +1,7 @@
-"""The odometry's answer moves about as little as its calibration did: a change of the intrinsics by
-1e-7 of themselves (a calibration rounded to float32 moves them by about that) must not re-draw the
-trajectory. RANSAC's discrete choices did: a pose now ends at the minimum of a smooth loss."""
+"""A pose moves about as little as its calibration did: a change of the intrinsics by 1e-7 of
+themselves (a calibration rounded to float32 moves them by about that) must not re-draw it. RANSAC's
+discrete choices did; a pose now ends at the minimum of a smooth loss. Rendered drives still move by
+up to a few tenths of a point (docs/odometry.md); these bound the PnP and the real snippet."""
 
 from __future__ import annotations
 

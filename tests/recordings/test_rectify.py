@@ -18,7 +18,8 @@ KITTI_SIZE = (1241, 376)
 def test_a_rig_already_rectified_keeps_its_calibration_to_the_last_digit():
     """KITTI's rectified cameras through ingest's rectification at their own size: OpenCV's
     stereoRectify gives fx 718.8560119 and cx, cy rounded to float32 (a 2e-8 change that moved one
-    real drive's drift by 0.6 points); the calibration written is the one given."""
+    real drive's drift by 0.6 points with the odometry before its robust PnP); the calibration
+    written is the one given."""
     camera = CameraModel(KITTI_K, np.zeros(5), KITTI_SIZE)
     rig = StereoRig(camera, camera, np.eye(3), np.array([-0.537, 0.0, 0.0]), Path("kitti.yaml")).checked()
     calibration = Rectifier(rig, KITTI_SIZE, KITTI_SIZE, 0.0).calibration

@@ -176,7 +176,7 @@ class FrontEnd:
         return transform
 
 
-# Gauss-Newton steps of the robust PnP at most; it converges in far fewer from RANSAC's pose.
+# Gauss-Newton steps of the robust PnP at most; it stops earlier once a step is under 1e-12.
 _ROBUST_ITERATIONS = 50
 
 
