@@ -32,7 +32,7 @@ from offroad_path.config.training_schema import (
     TrainConfig,
     TrainerConfig,
 )
-from offroad_path.config.world_schema import PathsConfig, RigConfig, SynthesizeConfig, WorldConfig, check_looks_drawable
+from offroad_path.config.world_schema import PathsConfig, RenderConfig, RigConfig, SynthesizeConfig, WorldConfig, check_looks_drawable
 from offroad_path.errors import InputError
 from offroad_path.utils.rules import setting, validate
 
@@ -41,6 +41,7 @@ from offroad_path.utils.rules import setting, validate
 class Config:
     paths: PathsConfig = field(default_factory=PathsConfig)
     world: WorldConfig = field(default_factory=WorldConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
     synthesize: SynthesizeConfig = field(default_factory=SynthesizeConfig)
     ingest: IngestConfig = field(default_factory=IngestConfig)
     label: LabelConfig = field(default_factory=LabelConfig)

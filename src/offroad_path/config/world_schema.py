@@ -150,6 +150,13 @@ class TestWorldsConfig:
 
 
 @dataclass
+class RenderConfig:
+    backend: str = setting(one_of(("numpy", "torch")))
+    device: str = MISSING  # torch's device name, or auto
+    views_per_batch: int = setting(at_least(2))
+
+
+@dataclass
 class SynthesizeConfig:
     sequences: int = setting(at_least(1))
     seed: int = MISSING

@@ -26,7 +26,7 @@ def outputs(cfg: DictConfig) -> Outputs:
     return Outputs("synthesize", folders={"synthesize.out_dir": cfg.synthesize.out_dir})
 
 
-@reads("synthesize", "world", "mlflow", writes=outputs)
+@reads("synthesize", "world", "render", "mlflow", writes=outputs)
 def synthesize(cfg: DictConfig) -> list[dict]:
     out_dir = Path(cfg.synthesize.out_dir)
     with stage_run(cfg, "synthesize") as run, atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:
@@ -34,7 +34,7 @@ def synthesize(cfg: DictConfig) -> list[dict]:
         held_out = choose_held_out_worlds(cfg.world, synthesize_cfg.test_worlds, synthesize_cfg.seed, synthesize_cfg.workers)
         drives = [(f"seq_{i:03d}", sequence_seed(synthesize_cfg.seed, i), False) for i in range(synthesize_cfg.sequences)]
         drives += [(w.name, w.seed, True, w.draw, w.test_set) for w in held_out]
-        summaries = record_sequences(cfg.world, drives, tmp, synthesize_cfg.workers)
+        summaries = record_sequences(cfg.world, drives, tmp, synthesize_cfg.workers, cfg.render)
         tested = [
             {"name": w.name, "test_set": w.test_set, "blocks": w.blocks, "condition_groups": list(w.groups), "look_draw": w.draw}
             for w in held_out

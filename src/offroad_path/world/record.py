@@ -6,8 +6,10 @@ import json
 import logging
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -25,7 +27,7 @@ from offroad_path.utils.media import write_image
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.conditions import conditions_csv, frame_conditions
-from offroad_path.world.render import PinholeCamera, render_view
+from offroad_path.world.render import PinholeCamera, View, render_view
 from offroad_path.world.scene import World, build_world
 
 log = logging.getLogger(__name__)
@@ -62,27 +64,24 @@ def encode_depth(depth_m: np.ndarray) -> np.ndarray:
     return np.where(depth_m > 0, mm, 0).astype(np.uint16)
 
 
-def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, test_set: str | None = None, draw: str = "training") -> dict:
+def record_sequence(  # noqa: PLR0913
+    cfg: WorldConfig, seed: int, out_dir: Path, test_set: str | None = None, draw: str = "training", *, render: Any = None
+) -> dict:
     """Render one sequence into out_dir; returns a summary (frames, distance, class pixel counts).
     test_set: None for a training drive, else a held-out test world (meta.json's "split": "test"),
     which the split stage keeps for testing, of that test set (meta.json's "test_set": main, or the
-    stress set it was drawn for); draw: how its look is drawn (offroad_path.world.appearance.DRAWS)."""
+    stress set it was drawn for); draw: how its look is drawn (offroad_path.world.appearance.DRAWS);
+    render: the renderer (conf/render; None: the NumPy reference)."""
     held_out = test_set is not None
     world = build_world(cfg, seed, draw)
     camera = camera_for(cfg)
-    rays = camera.rays()
     baseline = cfg.rig.baseline_m
-    to_right = np.eye(4)
-    to_right[0, 3] = baseline  # the right camera sits at +B along the left camera's x axis
 
     for sub in ("image_l", "image_r", "depth", "semantic"):
         (out_dir / sub).mkdir(parents=True)
     class_pixels = np.zeros(len(CLASS_NAMES), np.int64)
-    shutter_m = _shutter_metres(world, cfg.fps)
-    for k, pose in enumerate(world.poses):
+    for k, (left, right) in enumerate(stereo_views(world, camera, cfg, seed, render)):
         name = f"{k:06d}.png"
-        left = render_view(world, camera, pose, cfg.max_distance_m, rays, shutter_m[k], (seed, k, 0))
-        right = render_view(world, camera, matmul(pose, to_right), cfg.max_distance_m, rays, shutter_m[k], (seed, k, 1))
         write_image(out_dir / "image_l" / name, left.image[:, :, ::-1], FAST_PNG)
         write_image(out_dir / "image_r" / name, right.image[:, :, ::-1], FAST_PNG)
         write_image(out_dir / "depth" / name, encode_depth(left.depth), FAST_PNG)
@@ -132,6 +131,35 @@ def record_sequence(cfg: WorldConfig, seed: int, out_dir: Path, test_set: str | 
     return summary | ({meta_keys.SPLIT: meta_keys.HELD_OUT} if held_out else {}) | {"class_pixels": class_pixels.tolist()}
 
 
+def stereo_views(world: World, camera: PinholeCamera, cfg: WorldConfig, seed: int, render: Any = None) -> Iterator[tuple[View, View]]:
+    """Each frame's (left, right) views of the drive, in order: frame k's noise from (seed, k, camera).
+    render.backend torch renders render.views_per_batch views at once on render.device."""
+    to_right = np.eye(4)
+    to_right[0, 3] = cfg.rig.baseline_m  # the right camera sits at +B along the left camera's x axis
+    left_poses = world.poses
+    right_poses = matmul(left_poses, to_right[None])
+    shutter_m = _shutter_metres(world, cfg.fps)
+    if render is None or render.backend == "numpy":
+        rays = camera.rays()
+        for k in range(len(left_poses)):
+            yield (
+                render_view(world, camera, left_poses[k], cfg.max_distance_m, rays, shutter_m[k], (seed, k, 0)),
+                render_view(world, camera, right_poses[k], cfg.max_distance_m, rays, shutter_m[k], (seed, k, 1)),
+            )
+        return
+    from offroad_path.world.render_torch import DeviceWorld, render_views, torch_device  # torch only for this renderer
+
+    device_world = DeviceWorld(world, torch_device(render.device))
+    per_batch = max(1, render.views_per_batch // 2)
+    for start in range(0, len(left_poses), per_batch):
+        frames = slice(start, min(start + per_batch, len(left_poses)))
+        numbers = range(frames.start, frames.stop)
+        poses = np.concatenate([left_poses[frames], right_poses[frames]])
+        keys = [(seed, k, 0) for k in numbers] + [(seed, k, 1) for k in numbers]
+        views = render_views(device_world, camera, poses, cfg.max_distance_m, motion_m=np.tile(shutter_m[frames], 2), noise_keys=keys)
+        yield from zip(views[: len(numbers)], views[len(numbers) :], strict=True)
+
+
 def _shutter_metres(world: World, fps: float) -> np.ndarray:
     """Metres driven while each frame's shutter is open (its speed from the frame spacing), 0 without a look."""
     if world.look is None:
@@ -140,15 +168,16 @@ def _shutter_metres(world: World, fps: float) -> np.ndarray:
     return speed * world.look.sensor.shutter_s
 
 
-def _record_job(args: tuple[WorldConfig, int, str, str | None, str]) -> dict:
+def _record_job(args: tuple[WorldConfig, int, str, str | None, str, Any]) -> dict:
     cv2.setNumThreads(1)  # one process per core: no nested threading
-    cfg, seed, out_dir, test_set, draw = args
-    return record_sequence(cfg, seed, Path(out_dir), test_set, draw)
+    cfg, seed, out_dir, test_set, draw, render = args
+    return record_sequence(cfg, seed, Path(out_dir), test_set, draw, render=render)
 
 
-def record_sequences(cfg: WorldConfig, drives: list[tuple], out_dir: Path, workers: int = 0) -> list[dict]:
-    """Render each drive (name, seed, held out[, look draw[, test set]]) into out_dir/<name> in parallel, one process per worker."""
-    jobs = [(cfg, d[1], str(out_dir / d[0]), (d[4] if len(d) > 4 else "main") if d[2] else None, d[3] if len(d) > 3 else "training")
+def record_sequences(cfg: WorldConfig, drives: list[tuple], out_dir: Path, workers: int = 0, render: Any = None) -> list[dict]:
+    """Render each drive (name, seed, held out[, look draw[, test set]]) into out_dir/<name> in parallel, one process per
+    worker, with `render` (conf/render; None: the NumPy reference)."""
+    jobs = [(cfg, d[1], str(out_dir / d[0]), (d[4] if len(d) > 4 else "main") if d[2] else None, d[3] if len(d) > 3 else "training", render)
             for d in drives]  # fmt: skip
     start = time.perf_counter()
     summaries = map_processes(_record_job, jobs, workers, [f"sequence {drive[0]}" for drive in drives], "render")
