@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -36,6 +38,14 @@ def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config
     rows = [r for r, keep in zip(frame_conditions(world, cfg.world), labelled, strict=True) if keep]
     assert groups == tuple(k for k, _, test in GROUPS if sum(map(test, rows)) >= MIN_FRAMES)
     assert "all" in groups and len(groups) < len(GROUPS)  # one world does not show everything
+    # The survey builds its worlds without textures: the same world in everything else.
+    bare = build_world(cfg.world, seed, textures=False)
+    assert not bare.textures.keys() - {"dapple"} and world.textures.keys() - bare.textures.keys()
+    for name in ("materials", "shadow", "poses", "palette", "steering", "wear"):
+        assert np.array_equal(getattr(bare, name), getattr(world, name)), name
+    assert np.array_equal(bare.terrain.heights, world.terrain.heights) and bare.look == world.look
+    assert all(np.array_equal(getattr(bare.sky, f.name), getattr(world.sky, f.name)) for f in dataclasses.fields(world.sky))
+    assert np.array_equal(bare.objects.arrays().params, world.objects.arrays().params)
 
 
 @pytest.mark.slow(seconds=40)
@@ -79,17 +89,21 @@ def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog
     assert {w.test_set for w in chosen} == {"main"} and "stress set outside_look" in caplog.text
 
 
-@pytest.mark.slow(seconds=6)
+@pytest.mark.slow(seconds=11)
 def test_too_few_candidates_is_an_error_naming_the_set(compose_config):
     world = compose_config("world.frames=40").world  # a short drive: one block, quick to survey
-    c = compose_config("synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50").synthesize.test_worlds
+    # Every set runs out (dev, main and a stress set, surveyed together): the first is named.
+    c = compose_config(
+        "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50", "synthesize.test_worlds.stress_sets=[dappled]"
+    ).synthesize.test_worlds
     with pytest.raises(
         ValueError, match=r"test_worlds\.development_blocks: 1 candidate worlds hold fewer than 30 blocks; raise max_candidates"
     ):
         choose_held_out_worlds(world, c, master_seed=0, workers=1)
     c = compose_config(
-        "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50", "synthesize.test_worlds.development_blocks=0"
-    ).synthesize.test_worlds
+        "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50", "synthesize.test_worlds.development_blocks=0",
+        "synthesize.test_worlds.stress_sets=[]",
+    ).synthesize.test_worlds  # fmt: skip
     with pytest.raises(ValueError, match=r"test_worlds\.min_blocks: 1 candidate worlds hold fewer than 50 blocks; raise max_candidates"):
         choose_held_out_worlds(world, c, master_seed=0, workers=1)
     c = compose_config(

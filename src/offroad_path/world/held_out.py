@@ -25,13 +25,14 @@ only kept worlds are rendered.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from offroad_path.config.world_schema import TestWorldsConfig, WorldConfig
 from offroad_path.sequence.meta import DEVELOPMENT, MAIN
 from offroad_path.utils.parallel import map_processes
+from offroad_path.utils.threads import usable_cores
 from offroad_path.world.appearance import AXES, training_values
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
@@ -84,7 +85,7 @@ def stress_seed(master_seed: int, stress_set: str, index: int) -> int:
 def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig, draw: str = "training") -> tuple[int, tuple[str, ...]]:
     """(blocks of labelled driving, condition groups shown) of the world drawn from `seed`: frames
     with `horizon_m` of drive ahead get labels; blocks start every `block_m` along the drive."""
-    world = build_world(cfg, seed, draw)
+    world = build_world(cfg, seed, draw, textures=False)  # what a world shows does not depend on its textures
     s = np.asarray(world.frame_s) - world.frame_s[0]
     labelled = s <= s[-1] - c.horizon_m
     rows = [row for row, keep in zip(frame_conditions(world, cfg), labelled, strict=True) if keep]
@@ -98,61 +99,84 @@ def _survey_job(args: tuple[WorldConfig, int, int, TestWorldsConfig, str]) -> He
     return HeldOutWorld(index, seed, *survey(cfg, seed, c, STRESS_DRAWS.get(test_set, "training")), test_set=test_set)
 
 
-def _candidates(cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, test_set: str, workers: int):
-    """Surveyed candidate worlds of one set, in seed order, `workers` at a time (up to max_candidates)."""
-    batch = max(1, workers or 2)
-    for start in range(0, c.max_candidates, batch):
-        indices = range(start, min(start + batch, c.max_candidates))
-        seeds = [held_out_seed(master_seed, i, test_set) if test_set in STREAMS else stress_seed(master_seed, test_set, i) for i in indices]
-        jobs = [(cfg, i, seed, c, test_set) for i, seed in zip(indices, seeds, strict=True)]
-        yield from map_processes(_survey_job, jobs, workers, [f"{test_set} test world {i}" for i in indices])
+@dataclass
+class _Search:
+    """One set's walk through its candidate worlds, in seed order, and the worlds it has kept."""
+
+    test_set: str
+    wanted: int  # blocks (a set drawn as the training drives are) or worlds (a stress set)
+    key: str  # the setting that asks for them, named when the candidates run out
+    next_index: int = 0
+    kept: list[HeldOutWorld] = field(default_factory=list)
+
+    @property
+    def stress(self) -> bool:
+        return self.test_set not in STREAMS
+
+    @property
+    def done(self) -> bool:
+        return (len(self.kept) if self.stress else sum(w.blocks for w in self.kept)) >= self.wanted
+
+    def seed(self, master_seed: int, index: int) -> int:
+        return stress_seed(master_seed, self.test_set, index) if self.stress else held_out_seed(master_seed, index, self.test_set)
+
+    def take(self, world: HeldOutWorld) -> None:
+        """The next candidate in seed order: kept while the set is not made (a stress set's, if it shows the case)."""
+        if not self.done and (not self.stress or self.test_set in world.groups):
+            self.kept.append(world)
 
 
 def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, workers: int = 0) -> list[HeldOutWorld]:
-    """The main test set, then each stress set (module docstring); ValueError naming the set when
-    `max_candidates` worlds do not make it. min_blocks 0: no test worlds at all."""
+    """The development and main test sets, then each stress set (module docstring); ValueError naming
+    the set when `max_candidates` worlds do not make it. min_blocks 0: no test worlds at all.
+
+    Every set's candidates are surveyed in rounds, one process map per round over every set not yet
+    done, so that all cores work and worker processes start once a round, not once a set's batch.
+    A set takes its candidates in seed order whatever the round size: which worlds are chosen does not
+    depend on the cores (surplus candidates of a round are surveyed and dropped)."""
     if c.min_blocks == 0:
         return []
-    chosen: list[HeldOutWorld] = []
-    for test_set, min_blocks, key in ((DEVELOPMENT, c.development_blocks, "development_blocks"), (MAIN, c.min_blocks, "min_blocks")):
-        chosen += _draw_blocks(cfg, c, master_seed, workers, test_set=test_set, min_blocks=min_blocks, key=key)
+    searches = [_Search(DEVELOPMENT, c.development_blocks, "development_blocks"), _Search(MAIN, c.min_blocks, "min_blocks")]
     for stress_set in c.stress_sets:
         if stress_set in STRESS_DRAWS and not _draws_differ(cfg, stress_set):
             log.warning("stress set %s: the training distribution already draws every such look; left out", stress_set)
+        else:
+            searches.append(_Search(stress_set, c.per_stress, "per_stress"))
+    cores = workers or usable_cores()
+    while open_searches := [s for s in searches if not s.done and s.next_index < c.max_candidates]:
+        per_search = max(1, -(-cores // len(open_searches)))
+        jobs = []
+        for search in open_searches:
+            indices = range(search.next_index, min(search.next_index + per_search, c.max_candidates))
+            jobs += [(cfg, i, search.seed(master_seed, i), c, search.test_set) for i in indices]
+            search.next_index = indices.stop
+        by_set = {s.test_set: s for s in open_searches}
+        for world in map_processes(_survey_job, jobs, workers, [f"{job[4]} test world {job[1]}" for job in jobs]):
+            by_set[world.test_set].take(world)
+        _check_shortfall(searches, c.max_candidates)
+    for search in searches:
+        name = f"stress set {search.test_set}" if search.stress else f"{search.test_set} set"
+        log.info("%s: %d worlds, %d blocks", name, len(search.kept), sum(w.blocks for w in search.kept))
+    return [world for search in searches for world in search.kept]
+
+
+def _check_shortfall(searches: list[_Search], max_candidates: int) -> None:
+    """ValueError naming the first set, in order, whose candidates ran out before it was made, as soon
+    as every set before it is made (so the error is the one a set-by-set search would raise)."""
+    for search in searches:
+        if search.done:
             continue
-        kept = []
-        for world in _candidates(cfg, c, master_seed, stress_set, workers) if c.per_stress else ():
-            if stress_set in world.groups:
-                kept.append(world)
-                if len(kept) == c.per_stress:
-                    break
-        if len(kept) < c.per_stress:
+        if search.next_index < max_candidates:
+            return  # still searching: a later set's shortfall waits for it
+        if search.stress:
             raise ValueError(
-                f"synthesize.test_worlds: {c.max_candidates} candidate worlds give stress set {stress_set} "
-                f"{len(kept)} of {c.per_stress} worlds; raise max_candidates or lower per_stress"
+                f"synthesize.test_worlds: {max_candidates} candidate worlds give stress set {search.test_set} "
+                f"{len(search.kept)} of {search.wanted} worlds; raise max_candidates or lower per_stress"
             )
-        log.info("stress set %s: %d worlds, %d blocks", stress_set, len(kept), sum(w.blocks for w in kept))
-        chosen += kept
-    return chosen
-
-
-def _draw_blocks(  # noqa: PLR0913
-    cfg: WorldConfig, c: TestWorldsConfig, master_seed: int, workers: int, *, test_set: str, min_blocks: int, key: str
-) -> list[HeldOutWorld]:
-    """The first worlds of a set drawn as the training drives are that hold `min_blocks` blocks."""
-    drawn: list[HeldOutWorld] = []
-    for world in _candidates(cfg, c, master_seed, test_set, workers) if min_blocks else ():
-        drawn.append(world)
-        if sum(w.blocks for w in drawn) >= min_blocks:
-            break
-    else:
-        if min_blocks:
-            raise ValueError(
-                f"synthesize.test_worlds.{key}: {c.max_candidates} candidate worlds hold fewer than {min_blocks} blocks; "
-                "raise max_candidates"
-            )
-    log.info("%s set: %d worlds, %d blocks", test_set, len(drawn), sum(w.blocks for w in drawn))
-    return drawn
+        raise ValueError(
+            f"synthesize.test_worlds.{search.key}: {max_candidates} candidate worlds hold fewer than {search.wanted} blocks; "
+            "raise max_candidates"
+        )
 
 
 def _draws_differ(cfg: WorldConfig, stress_set: str) -> bool:

@@ -79,10 +79,12 @@ class World:
         return self.materials[row, col]
 
 
-def build_world(cfg: WorldConfig, seed: int, draw: str = "training") -> World:
+def build_world(cfg: WorldConfig, seed: int, draw: str = "training", *, textures: bool = True) -> World:
     """The world drawn from `seed`; `draw`: how its appearance is drawn (world.appearance.DRAWS):
     by world.appearance.weights, from every value alike, or one of world.appearance.held_out's
-    combinations (the held-out-appearance test worlds)."""
+    combinations (the held-out-appearance test worlds). textures=False leaves out the surface
+    textures, a third of the time, for a world that is surveyed and never rendered: they are the
+    last draws of the world's generator, so everything else is the same world."""
     rng = np.random.default_rng(seed)
     look = draw_appearance(seed, held_out_combinations(cfg), draw, appearance_weights(cfg)) if cfg.appearance.enabled else None
     dress = appearance_rng(seed) if look else None
@@ -137,7 +139,7 @@ def build_world(cfg: WorldConfig, seed: int, draw: str = "training") -> World:
     sky = _sky(rng, cfg)
     objects = place_objects(Placement(rng, cfg, terrain, drive), track, density)
     palette = _palette(rng)
-    textures = _textures(rng)
+    surface = _textures(rng) if textures else {}  # the generator's last draws (the look draws from its own)
     world = World(
         terrain,
         materials,
@@ -151,7 +153,7 @@ def build_world(cfg: WorldConfig, seed: int, draw: str = "training") -> World:
         frame_s,
         poses,
         steering,
-        textures,
+        surface,
         forks,
         slip,
     )
