@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 from torchmetrics.classification import BinaryPrecisionRecallCurve
+from torchmetrics.functional.classification import binary_stat_scores
 
 from offroad_path.evaluate.pixel_scores import counts, mean_path, non_corresponding, per_image_iou, pooled, precision_recall_curve
 
@@ -21,6 +22,20 @@ CONFIDENCE = np.array([[[0.9, 0.6, 0.5], [0.7, 0.1, 0.0]], [[0.0, 0.0, 0.0], [0.
 
 def test_counts_follow_the_papers_threshold_rule():
     np.testing.assert_array_equal(counts(CONFIDENCE, TRUTH), [[2, 1, 2, 1], [1, 2, 3, 0]])
+
+
+def test_counts_are_torchmetrics_stat_scores_at_the_papers_rule():
+    """The NumPy counts against torchmetrics on random maps, with values on the threshold itself
+    (torchmetrics thresholds with >=, the paper with >: the predictions go in already thresholded)."""
+    rng = np.random.default_rng(0)
+    confidence = np.round(rng.random((5, 24, 40)), 1).astype(np.float32)  # many pixels exactly 0.5
+    truth = rng.random((5, 24, 40)) < 0.3
+    for threshold in (0.5, 0.25, 0.0, 1.0):
+        predicted = torch.from_numpy(confidence > np.float32(threshold)).flatten(1).long()
+        expected = binary_stat_scores(predicted, torch.from_numpy(truth).flatten(1).long(), multidim_average="samplewise")
+        np.testing.assert_array_equal(counts(confidence, truth, threshold), expected[:, :4].numpy())
+    np.testing.assert_array_equal(counts(confidence, truth.astype(np.uint8)), counts(confidence, truth))
+    assert counts(np.zeros((0, 4, 4), np.float32), np.zeros((0, 4, 4), bool)).shape == (0, 4)
 
 
 def test_pooled_scores_versus_per_image_mean_iou():
