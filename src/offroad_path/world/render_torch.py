@@ -23,7 +23,13 @@ __all__ = ["DeviceWorld", "render_views", "torch_device"]
 
 
 def render_views(  # noqa: PLR0913
-    dw: DeviceWorld, camera: PinholeCamera, poses: np.ndarray, max_t: float, *, motion_m=None, noise_keys=None
+    dw: DeviceWorld,
+    camera: PinholeCamera,
+    poses: np.ndarray,
+    max_t: float,
+    *,
+    motion_m: np.ndarray | None = None,
+    noise_keys: list[tuple[int, ...]] | None = None,
 ) -> list[View]:
     """render.render_view of each camera-to-world pose (V, 4, 4), together: what the reference renders
     for each (pose, motion_m[k], noise_keys[k]), to the agreement tests/world/test_render_torch.py checks."""

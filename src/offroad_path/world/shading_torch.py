@@ -11,6 +11,7 @@ from torch import Tensor
 from offroad_path.world.classes import SKY, WATER
 from offroad_path.world.render import GAMMA, PinholeCamera
 from offroad_path.world.sensor import BLUR_SAMPLES, LUMA
+from offroad_path.world.terrain import Grid
 from offroad_path.world.trace_torch import F32, F64, DeviceWorld, bilinear
 
 
@@ -79,7 +80,7 @@ def shade(dw: DeviceWorld, camera: PinholeCamera, hits: Hits) -> tuple[Tensor, T
     return rgb, semantic
 
 
-def _grid_coords(grid, x: Tensor, z: Tensor) -> tuple[Tensor, Tensor]:
+def _grid_coords(grid: Grid, x: Tensor, z: Tensor) -> tuple[Tensor, Tensor]:
     """terrain.Grid.coords: fractional (col, row) float32 of world points."""
     return ((x - grid.x0) / grid.step).to(F32), ((z - grid.z0) / grid.step).to(F32)
 

@@ -1,13 +1,7 @@
-"""What each ray of world/render_torch.py's batches hits: the world's arrays on the device, the terrain
-march and the analytic objects, ported from world/render.py.
-
-The reference is world/render.py, ported step by step: the same terrain march (clearance steps, the
-4 m and 16 m height bounds, bisection then false position), the same analytic objects, shading,
-textures, sky and sensor; tests/world/test_render_torch.py holds the two to agreement on the same
-views. What differs: the views of a batch march together (each ray carries its own camera's origin),
-and float sums run in the device's order, so the bytes are not the reference's, and on a GPU they
-are that GPU's. The sensor's last step (noise and compression, world/sensor.py's `record`) runs in
-NumPy on the host, from the same noise key: its draws are the reference's.
+"""What each ray of world/render_torch.py's batches hits, ported step by step from world/render.py:
+the world's arrays on the device, the terrain march (clearance steps, the 4 m and 16 m height
+bounds, bisection then false position) and the analytic objects. The views of a batch march
+together: each ray carries its own camera's origin.
 """
 
 from __future__ import annotations
@@ -50,7 +44,7 @@ class DeviceWorld:
         self.kind, self.params, self.bounds = put(objects.kind), put(objects.params, F64), put(objects.bounds, F64)
         self.object_cls, self.object_colour = put(objects.cls), put(objects.color, F64)
 
-    def vector(self, values) -> Tensor:
+    def vector(self, values: np.ndarray | list[float]) -> Tensor:
         return torch.as_tensor(np.asarray(values, np.float64), device=self.device)
 
 
@@ -265,10 +259,3 @@ def trace_objects(  # noqa: PLR0913
         index[ray[won]] = obj[won]
         normal[ray[won]] = n[won]
     return t_best, normal, index
-
-
-def torch_device(name: str) -> torch.device:
-    """conf/render's device: auto is the GPU where there is one, else the CPU."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
