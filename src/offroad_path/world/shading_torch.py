@@ -133,7 +133,7 @@ def expose(dw: DeviceWorld, linear: Tensor, depth: Tensor, motion_m: Tensor) -> 
     _, h, w, _ = linear.shape
     out = linear * (dw.vector(sensor.white_balance) * sensor.exposure)
     if sensor.auto_gain:
-        luma = out[..., 0] * LUMA[0] + out[..., 1] * LUMA[1] + out[..., 2] * LUMA[2]
+        luma = out[..., 0] * float(LUMA[0]) + out[..., 1] * float(LUMA[1]) + out[..., 2] * float(LUMA[2])
         total = torch.clamp(torch.round(luma * 4096), 0, 1 << 20).long().sum(dim=(1, 2))  # integer sums: any order
         mean = total.to(F64) / (4096 * h * w)
         out = out * torch.clamp(sensor.target / torch.clamp(mean, min=1e-6), 0.4, 3.0)[:, None, None, None]

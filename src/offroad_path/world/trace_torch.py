@@ -101,10 +101,10 @@ def march_terrain(dw: DeviceWorld, origin: Tensor, dirs: Tensor, top: Tensor, ma
     terrain = _Terrain(dw)
     origin, dirs = origin.to(F32), dirs.to(F32)
     horizontal = torch.hypot(dirs[:, 0], dirs[:, 2])
-    rate = dirs[:, 1] + np.float32(dw.world.terrain.max_slope) * horizontal
+    rate = dirs[:, 1] + float(np.float32(dw.world.terrain.max_slope)) * horizontal  # the reference's float32 bound
     t_hit = torch.full((len(dirs),), math.inf, dtype=F64, device=dw.device)
     rising = dirs[:, 1] < 0
-    t_limit = torch.where(rising, torch.minimum((top.to(F32) + origin[:, 1]) / -dirs[:, 1], torch.tensor(max_t, dtype=F32)), max_t)
+    t_limit = torch.where(rising, ((top.to(F32) + origin[:, 1]) / -dirs[:, 1]).clamp(max=max_t), max_t)
     inv_sink = torch.where(dirs[:, 1] > 0, 1.0 / dirs[:, 1], math.inf)
     idx = torch.nonzero((rate > 0) & (t_limit > NEAR_M))[:, 0]
     per_ray = [origin[idx, 0], origin[idx, 1], origin[idx, 2], dirs[idx, 0], dirs[idx, 1], dirs[idx, 2]]
