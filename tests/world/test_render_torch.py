@@ -13,7 +13,7 @@ import pytest
 
 from offroad_path.world.record import _shutter_metres, camera_for, record_sequence, record_sequences
 from offroad_path.world.render import render_view
-from offroad_path.world.render_torch import DeviceWorld, render_views
+from offroad_path.world.render_torch import DeviceWorld, render_views, torch_device
 from offroad_path.world.scene import build_world
 
 FRAMES = [3, 17, 31]
@@ -37,19 +37,21 @@ def drive(compose_config):
 
 @pytest.mark.parametrize("look", [True, False], ids=["with a look", "no look"])
 def test_the_torch_renderer_agrees_with_the_reference(drive, look):
+    """On the GPU where there is one (render.device's auto), else on the CPU."""
     cfg, world = drive
     world = world if look else dataclasses.replace(world, look=None)  # the gamma alone, no sensor
     camera, max_t = camera_for(cfg), cfg.max_distance_m
     shutter = _shutter_metres(world, cfg.fps)
     keys = [(23, k, 0) for k in FRAMES]
     reference = [render_view(world, camera, world.poses[k], max_t, None, shutter[k], key) for k, key in zip(FRAMES, keys, strict=True)]
-    ported = render_views(DeviceWorld(world, "cpu"), camera, world.poses[FRAMES], max_t, motion_m=shutter[FRAMES], noise_keys=keys)
+    device = torch_device("auto")
+    ported = render_views(DeviceWorld(world, device), camera, world.poses[FRAMES], max_t, motion_m=shutter[FRAMES], noise_keys=keys)
     assert len(world.objects.kind) > 0 and any((v.semantic == s).any() for v in reference for s in np.unique(world.materials))
     for r, p in zip(reference, ported, strict=True):
         agree(r, p)
     # Each view is its own whatever shares its batch: alone, it renders to the same bytes.
     one = FRAMES[1:2]
-    alone = render_views(DeviceWorld(world, "cpu"), camera, world.poses[one], max_t, motion_m=shutter[one], noise_keys=keys[1:2])[0]
+    alone = render_views(DeviceWorld(world, device), camera, world.poses[one], max_t, motion_m=shutter[one], noise_keys=keys[1:2])[0]
     assert np.array_equal(alone.image, ported[1].image) and np.array_equal(alone.depth, ported[1].depth)
 
 
