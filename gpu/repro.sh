@@ -2,7 +2,8 @@
 # The GPU preset's whole pipeline from nothing, in one go, on a GPU host without network
 # (docs/scaling.md): the project's packages from an offline wheelhouse, then gpu/dvc.yaml with MLflow
 # off and its independent stages side by side on the one GPU (tools/parallel_repro.py: --jobs at
-# once, each with its share of the cores), each stage timed into gpu/metrics/pipeline_time.json and
+# once, each with its share of the cores), each stage timed into gpu/metrics/pipeline_time.json as it
+# finishes (a run stopped by a time limit keeps the times it measured, `complete: false`) and
 # the GPU's utilisation sampled every second into gpu/metrics/gpu_utilisation.csv.
 #
 #   bash ../shared/gpu-host/wheelhouse.sh .whl --dvc     # where a package registry answers

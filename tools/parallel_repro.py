@@ -16,7 +16,9 @@ A failed stage stops the run: no stage starts after it, the running ones finish,
 exits 1 naming it and its log. SIGTERM or Ctrl-C stops every stage (each deletes its unfinished
 outputs, as under `dvc repro`). `--json` writes the machine, `total_s`, each stage's seconds from
 its start to its end and its span from the run's start (`spans`), in the format
-benchmarks/pipeline_time.py writes; `--log` every stage's output, each line prefixed by its stage.
+benchmarks/pipeline_time.py writes, rewritten as each stage finishes: a run stopped part way (a
+time limit's SIGTERM) leaves the stages it finished, with `complete: false` and the stages it
+stopped in `unfinished`; `--log` every stage's output, each line prefixed by its stage.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ def stage_graph(repo_root: Path, target: str) -> tuple[list[str], dict[str, set[
     repo = Repo(str(repo_root))
     graph = repo.index.graph
     mine = [s for s in repo.index.stages if s.path_in_repo == target]  # DVC's order: dvc.yaml's
-    names = {s: s.addressing.partition(":")[2] for s in mine}
+    names = {s: s.name for s in mine}  # `addressing` is relative to the working directory: no ":" from the pipeline's own
     upstream = {names[s]: {names[d] for d in graph.successors(s) if d in names} for s in mine}
     return [names[s] for s in mine], upstream
 
@@ -52,8 +54,8 @@ def stage_graph(repo_root: Path, target: str) -> tuple[list[str], dict[str, set[
 class Scheduler:
     """Starts each stage once its upstream stages have finished, at most `jobs` at once."""
 
-    def __init__(self, repo_root: Path, target: str, jobs: int, logs: Path) -> None:
-        self.repo_root, self.target, self.jobs, self.logs = repo_root, target, jobs, logs
+    def __init__(self, repo_root: Path, target: str, jobs: int, logs: Path, timing: Path | None = None) -> None:
+        self.repo_root, self.target, self.jobs, self.logs, self.timing = repo_root, target, jobs, logs, timing
         self.order, self.upstream = stage_graph(repo_root, target)
         self.env = {**os.environ, "OFFROAD_THREADS": str(max(1, len(os.sched_getaffinity(0)) // jobs))}
         self.start = time.monotonic()
@@ -80,6 +82,13 @@ class Scheduler:
                 self.failed = stage
             seconds = self.spans[stage][1] - self.spans[stage][0]
             print(f"{'failed' if process.returncode else 'finished'} {stage} in {seconds:.1f} s", flush=True)
+            self.write_timing()
+
+    def write_timing(self, unfinished: list[str] | None = None) -> None:
+        """The stage times so far (--json): complete once every stage has finished without a failure."""
+        if self.timing is not None:
+            complete = self.failed is None and not unfinished and self.spans.keys() == set(self.order)
+            write_json(self.timing, self.spans, self.jobs, complete=complete, unfinished=unfinished or [])
 
     def stop(self, signum: int, frame: object) -> None:
         """SIGTERM or Ctrl-C: every running stage gets SIGTERM (it deletes its unfinished outputs)."""
@@ -87,6 +96,7 @@ class Scheduler:
             process.send_signal(signal.SIGTERM)
         for process, _ in self.running.values():
             process.wait()
+        self.write_timing(unfinished=list(self.running))
         raise SystemExit(128 + signum)
 
     def run(self) -> str | None:
@@ -97,6 +107,7 @@ class Scheduler:
                 if self.failed is None:
                     self.start_ready()
                 if not self.running:
+                    self.write_timing()
                     return self.failed  # all done, or nothing more may start after a failure
                 time.sleep(0.2)
                 self.reap()
@@ -105,13 +116,13 @@ class Scheduler:
                 signal.signal(s, handler)
 
 
-def run(pipeline: Path, jobs: int, log: Path | None) -> tuple[dict[str, tuple[float, float]], int]:
-    """Run the pipeline's stages; each finished stage's span and the exit status."""
+def run(pipeline: Path, jobs: int, log: Path | None, timing: Path | None = None) -> tuple[dict[str, tuple[float, float]], int]:
+    """Run the pipeline's stages; each finished stage's span and the exit status. timing: --json's file."""
     from dvc.repo import Repo
 
     repo_root = Path(Repo.find_root(str(pipeline.resolve().parent)))
     logs = Path(tempfile.mkdtemp(prefix="parallel_repro."))
-    scheduler = Scheduler(repo_root, str(pipeline.resolve().relative_to(repo_root)), jobs, logs)
+    scheduler = Scheduler(repo_root, str(pipeline.resolve().relative_to(repo_root)), jobs, logs, timing)
     failed = scheduler.run()
     if log is not None:
         with log.open("w") as out:
@@ -126,16 +137,20 @@ def run(pipeline: Path, jobs: int, log: Path | None) -> tuple[dict[str, tuple[fl
     return scheduler.spans, 0
 
 
-def write_json(path: Path, spans: dict[str, tuple[float, float]], jobs: int) -> None:
+def write_json(path: Path, spans: dict[str, tuple[float, float]], jobs: int, *, complete: bool, unfinished: list[str]) -> None:
     timed = {
         "machine": machine(),
         "total_s": max((end for _, end in spans.values()), default=0.0),
         "jobs": jobs,
+        "complete": complete,
+        "unfinished": unfinished,
         "stages": {stage: round(end - began, 1) for stage, (began, end) in spans.items()},
         "spans": {stage: list(span) for stage, span in spans.items()},
     }
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(timed, indent=2) + "\n")
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps(timed, indent=2) + "\n")
+    partial.replace(path)  # whole or not at all, even when the run is stopped while writing
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -154,12 +169,10 @@ def main(argv: list[str] | None = None) -> int:
     from dvc.exceptions import NotDvcRepoError
 
     try:
-        spans, status = run(args.pipeline, args.jobs, args.log)
+        _, status = run(args.pipeline, args.jobs, args.log, args.json)
     except NotDvcRepoError:
         print(f"error: {args.pipeline}: not in a DVC repository (dvc init)", file=sys.stderr)
         return 2
-    if args.json is not None:
-        write_json(args.json, spans, args.jobs)
     return status
 
 

@@ -5,8 +5,11 @@ both, and the lock and outputs are those of one `dvc repro`; a failed stage stop
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -52,15 +55,39 @@ def test_independent_stages_run_side_by_side_and_the_lock_is_one_repros(tmp_path
     assert "up to date" in status.stdout, status.stdout + status.stderr
     timed = json.loads(timing.read_text())
     assert set(timed["stages"]) == {"first", "left", "right", "last"} and timed["jobs"] == 2
+    assert timed["complete"] is True and timed["unfinished"] == []
     assert timed["total_s"] >= timed["stages"]["left"] >= 3 and timed["total_s"] < timed["stages"]["left"] + timed["stages"]["right"] + 5
 
 
 def test_a_failed_stage_stops_what_depends_on_it_and_names_itself(tmp_path, capsys):
     pipeline(tmp_path, {"first": ([], 0, False), "broken": (["first"], 0, True), "after": (["broken"], 0, False)})
-    assert main([str(tmp_path / "dvc.yaml"), "--jobs", "2"]) == 1
+    timing = tmp_path / "pipeline_time.json"
+    assert main([str(tmp_path / "dvc.yaml"), "--jobs", "2", "--json", str(timing)]) == 1
+    timed = json.loads(timing.read_text())
+    assert timed["complete"] is False and set(timed["stages"]) == {"first", "broken"}
     assert "error: stage broken failed" in capsys.readouterr().err
     assert not (tmp_path / "after.txt").exists()
     assert set(yaml.safe_load((tmp_path / "dvc.lock").read_text())["stages"]) == {"first"}
+
+
+@pytest.mark.slow(seconds=6)
+def test_a_run_stopped_by_a_time_limit_keeps_the_times_of_the_stages_it_finished(tmp_path):
+    """A device's time limit sends SIGTERM: the stage times written so far stay, marked incomplete,
+    the stopped stage named unfinished. Run from the pipeline's own folder, where DVC's stage
+    addresses carry no file name (the tool once found no stage there and ran none)."""
+    pipeline(tmp_path, {"first": ([], 0, False), "long": (["first"], 60, False)})
+    timing = tmp_path / "pipeline_time.json"
+    tool = Path(__file__).resolve().parents[2] / "tools" / "parallel_repro.py"
+    run = subprocess.Popen([sys.executable, str(tool), str(tmp_path / "dvc.yaml"), "--json", str(timing)], cwd=tmp_path)
+    deadline = time.monotonic() + 60
+    while not (timing.is_file() and "first" in json.loads(timing.read_text())["stages"]) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)  # long's dvc has started its command
+    run.send_signal(signal.SIGTERM)
+    assert run.wait(timeout=60) == 128 + signal.SIGTERM
+    timed = json.loads(timing.read_text())
+    assert timed["complete"] is False and timed["unfinished"] == ["long"] and set(timed["stages"]) == {"first"}
+    assert not (tmp_path / "long.txt").exists()
 
 
 def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
