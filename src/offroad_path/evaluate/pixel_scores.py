@@ -19,8 +19,8 @@ def counts(confidence: np.ndarray, target: np.ndarray, threshold: float = 0.5) -
 
     confidence: (N, H, W) float in [0, 1]; target: (N, H, W) bool or 0/1.
     Counted with NumPy: torchmetrics' binary_stat_scores gives the same integers
-    (tests/evaluate/test_metrics.py), but through int64 copies of every pixel, 75 of the laptop
-    evaluate stage's 276 s.
+    (tests/evaluate/test_metrics.py), but through int64 copies of every pixel; with it, the committed
+    run's evaluate stage took 213 s instead of 167 s.
     """
     if confidence.shape != target.shape:
         raise ValueError(f"predictions {confidence.shape} and ground truth {target.shape} differ in shape")

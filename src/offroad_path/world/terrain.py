@@ -70,6 +70,16 @@ class Terrain:
             dilated = cv2.dilate(self.heights.astype(np.float32), kernel, borderType=cv2.BORDER_REPLICATE)
             self.max_levels.append((radius_m, dilated.ravel()))
 
+    @property
+    def corners(self) -> np.ndarray:
+        """(cells, 4) float32: each grid cell's corner heights h00, h01, h10, h11 (for the torch renderer)."""
+        return self._corners
+
+    @property
+    def gradient(self) -> np.ndarray:
+        """(rows, cols, 2) float32: the height field's x and z slopes, for shading normals."""
+        return self._grad
+
     def cell_coords(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fractional grid coordinates (float32), clamped inside the grid."""
         g = self.grid

@@ -31,9 +31,9 @@ class DeviceWorld:
         def put(array: np.ndarray, dtype: torch.dtype | None = None) -> Tensor:
             return torch.as_tensor(np.ascontiguousarray(array), device=self.device, dtype=dtype)
 
-        self.corners = put(terrain._corners)  # (cells, 4) float32: h00, h01, h10, h11
+        self.corners = put(terrain.corners)  # (cells, 4) float32: h00, h01, h10, h11
         self.levels = [(radius, put(flat)) for radius, flat in terrain.max_levels]
-        self.grad = put(terrain._grad)  # (rows, cols, 2) float32
+        self.grad = put(terrain.gradient)  # (rows, cols, 2) float32
         self.materials = put(world.materials)
         self.shadow = put(world.shadow, F32)
         self.wear = None if world.wear is None else put(world.wear)
@@ -74,7 +74,8 @@ class _Terrain:
 
     def __init__(self, dw: DeviceWorld):
         terrain = dw.world.terrain
-        self.dw, self.grid, self.rows, self.cols = dw, terrain.grid, terrain._rows, terrain._cols
+        self.dw, self.grid = dw, terrain.grid
+        self.rows, self.cols = terrain.heights.shape
 
     def cells(self, x: Tensor, z: Tensor) -> tuple[Tensor, Tensor]:
         g = self.grid
