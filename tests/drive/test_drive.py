@@ -59,7 +59,7 @@ class Constant(Policy):
     def __init__(self, angle: float):
         self.name, self.angle = "constant", angle
 
-    def steer(self, frame) -> float:
+    def act(self, frame, seen) -> float:
         return self.angle
 
 

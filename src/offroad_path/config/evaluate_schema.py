@@ -117,3 +117,4 @@ class DriveConfig:
     other_vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     bootstrap: BootstrapConfig = field(default_factory=BootstrapConfig)
     workers: int = setting(at_least(0))
+    device: str = MISSING  # the policies' networks: auto (the GPU where there is one), cpu, cuda, ...

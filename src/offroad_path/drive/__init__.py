@@ -59,7 +59,7 @@ def check_policies(d: DictConfig) -> None:
                     pilotnet_checkpoint(checkpoint)  # a path network's checkpoint given as PilotNet: refused here, not after work
 
 
-@reads("drive", "world", "postprocess", "label", "evaluate", "mlflow", writes=outputs)
+@reads("drive", "world", "render", "postprocess", "label", "evaluate", "mlflow", writes=outputs)
 def run_drive(cfg: DictConfig) -> dict:
     # The networks and the renderer (torch among them) once the config and outputs are checked.
     from offroad_path.drive.closed_loop import check_arguments_primaries, report
@@ -82,7 +82,18 @@ def run_drive(cfg: DictConfig) -> dict:
     started = time.perf_counter()
     with atomic_directory(drive.out_dir, "drive", key="drive.out_dir") as tmp:
         jobs = [
-            WorldJob(w, cfg.world, drive, tuple(drive.seeds), params, cfg.label.disparity, str(tmp), drive.video and i == 0)
+            WorldJob(
+                w,
+                cfg.world,
+                drive,
+                tuple(drive.seeds),
+                params,
+                cfg.label.disparity,
+                str(tmp),
+                i == 0 and drive.video,
+                cfg.render,
+                drive.device,
+            )
             for i, w in enumerate(worlds)
         ]
         results = map_processes(drive_world, jobs, drive.workers, [f"test world {w.folder}" for w in worlds], "drive")

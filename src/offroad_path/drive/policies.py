@@ -15,8 +15,9 @@ turns right), or None when it has nothing to say (no path predicted: the vehicle
 
 from __future__ import annotations
 
+import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import cv2
@@ -37,13 +38,17 @@ from offroad_path.world.trajectory import camera_poses_at
 
 @dataclass
 class StereoRig:
-    """The driven vehicle's stereo rig in one world: renders the pair at a pose, matches it."""
+    """The driven vehicle's stereo rig in one world: renders views at poses, matches a pair. With a
+    device world (world.render_torch.DeviceWorld) it renders with the torch port there,
+    views_per_batch at once; without, with the reference (world.render), one at a time."""
 
     world: object
     camera: PinholeCamera
     baseline_m: float
     max_distance_m: float
     matcher: cv2.StereoSGBM
+    device_world: object | None = None
+    views_per_batch: int = 32
 
     def __post_init__(self) -> None:
         self.rays = self.camera.rays()
@@ -51,50 +56,101 @@ class StereoRig:
         self.to_right[0, 3] = self.baseline_m
 
     def render(self, pose: np.ndarray) -> np.ndarray:
-        return render_view(self.world, self.camera, pose, self.max_distance_m, self.rays).image
+        return self.render_many([pose])[0]
+
+    def render_many(self, poses: list[np.ndarray]) -> list[np.ndarray]:
+        """(H, W, 3) RGB images, one per camera-to-world pose (4, 4)."""
+        if self.device_world is None:
+            return [render_view(self.world, self.camera, pose, self.max_distance_m, self.rays).image for pose in poses]
+        from offroad_path.world.render_torch import render_views
+
+        images: list[np.ndarray] = []
+        for i in range(0, len(poses), self.views_per_batch):
+            batch = np.stack(poses[i : i + self.views_per_batch])
+            images += [view.image for view in render_views(self.device_world, self.camera, batch, self.max_distance_m)]
+        return images
+
+
+LEFT, RIGHT = "left", "right"
 
 
 @dataclass
 class Frame:
-    """One control step: the state, where it stands on the course, and the camera's view on demand."""
+    """One control step: the state, where it stands on the course, and the camera's views, rendered
+    on demand or beforehand for many frames at once (render_views_of)."""
 
     state: State
     progress_s: float
     vehicle: Vehicle
     course: Course
     rig: StereoRig
+    views: dict[str, np.ndarray] = field(default_factory=dict)  # LEFT, RIGHT -> (H, W, 3) RGB
 
     @cached_property
     def pose(self) -> np.ndarray:  # (4, 4) left camera to world
         return camera_poses_at(self.state.xz[None], np.array([self.state.heading]), self.course.world.terrain, self.vehicle.geometry)[0]
 
-    @cached_property
+    def view_pose(self, name: str) -> np.ndarray:
+        return self.pose if name == LEFT else self.pose @ self.rig.to_right
+
+    def _view(self, name: str) -> np.ndarray:
+        if name not in self.views:
+            self.views[name] = self.rig.render(self.view_pose(name))
+        return self.views[name]
+
+    @property
     def left(self) -> np.ndarray:  # (H, W, 3) RGB
-        return self.rig.render(self.pose)
+        return self._view(LEFT)
 
     @cached_property
     def depth(self) -> np.ndarray:  # (H, W) metres from StereoSGBM, 0 where unknown
-        right = self.rig.render(self.pose @ self.rig.to_right)
-        grey = [cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) for image in (self.left, right)]
+        grey = [cv2.cvtColor(self._view(name), cv2.COLOR_RGB2GRAY) for name in (LEFT, RIGHT)]
         return depth_from_disparity(compute_disparity(self.rig.matcher, *grey), self.rig.camera.fx, self.rig.baseline_m)
 
 
+def render_views_of(frames: list[Frame], views: list[tuple[str, ...]]) -> None:
+    """Render views[k] of frames[k] (not yet rendered), all in one batch per rig."""
+    wanted: dict[int, list[tuple[Frame, str]]] = {}
+    for frame, names in zip(frames, views, strict=True):
+        wanted.setdefault(id(frame.rig), []).extend((frame, name) for name in names if name not in frame.views)
+    for pairs in wanted.values():
+        if pairs:
+            images = pairs[0][0].rig.render_many([frame.view_pose(name) for frame, name in pairs])
+            for (frame, name), image in zip(pairs, images, strict=True):
+                frame.views[name] = image
+
+
 class Policy:
+    """steer(frame) = act(frame, look([frame])[0]). look is the part batched over drives: it may use
+    only `network`, which drives whose policies share it share; act is the drive's own."""
+
     name: str
     shown: np.ndarray | None = None  # what the last step saw, for the drive's video: a path mask or None
+    views: tuple[str, ...] = ()  # the camera views a step renders for it
+    network: object | None = None  # what look runs; None: look is per drive
 
     def reset(self) -> None:
         """After an intervention: the vehicle was moved, forget the past."""
 
-    def steer(self, frame: Frame) -> float | None:
+    def fresh(self) -> Policy:
+        """The same policy for another drive: its network shared, its state its own."""
+        return copy.copy(self)
+
+    def look(self, frames: list[Frame]) -> list:
+        return [None] * len(frames)
+
+    def act(self, frame: Frame, seen: object) -> float | None:
         raise NotImplementedError
+
+    def steer(self, frame: Frame) -> float | None:
+        return self.act(frame, self.look([frame])[0])
 
 
 @dataclass
 class StraightPolicy(Policy):
     name: str = "straight"
 
-    def steer(self, frame: Frame) -> float | None:
+    def act(self, frame: Frame, seen: object) -> float | None:
         return 0.0
 
 
@@ -103,7 +159,7 @@ class OraclePolicy(Policy):
     lookahead_m: float
     name: str = "oracle"
 
-    def steer(self, frame: Frame) -> float | None:
+    def act(self, frame: Frame, seen: object) -> float | None:
         v = frame.vehicle
         ahead = frame.course.reference_ahead(frame.progress_s, 3 * self.lookahead_m)
         return pure_pursuit(frame.state.to_vehicle(ahead, v.geometry.wheelbase_m / 2), self.lookahead_m, v.geometry.wheelbase_m)
@@ -118,16 +174,22 @@ class PilotNetPolicy(Policy):
     # 1/m of output 1 for a PilotNet that predicts curvature (steering.target=curvature); None: it
     # predicts the normalised angle, which is scaled by this vehicle's lock
     max_curvature: float | None = None
+    views = (LEFT,)
 
     def __post_init__(self) -> None:
         self._prepare = steering_transforms(jitter=0.0, seed=0)
+        self.network = self.task
 
-    def steer(self, frame: Frame) -> float | None:
+    def look(self, frames: list[Frame]) -> list[float]:
         # The resize and normalisation of training (steering.angle_dataset), without the jitter.
-        image = cv2.resize(frame.left, (self.width, self.height), interpolation=cv2.INTER_LINEAR)
-        batch = self._prepare(image=image)["image"][None]  # (1, 3, H, W)
+        images = [cv2.resize(f.left, (self.width, self.height), interpolation=cv2.INTER_LINEAR) for f in frames]
+        batch = torch.stack([self._prepare(image=image)["image"] for image in images])  # (N, 3, H, W)
+        device = next(self.task.parameters()).device
         with torch.no_grad():
-            normalised = float(self.task(batch)[0])
+            return [float(v) for v in self.task(batch.to(device)).float().cpu().reshape(len(frames))]
+
+    def act(self, frame: Frame, seen: object) -> float | None:
+        normalised = float(seen)
         if self.max_curvature is None:
             return normalised * frame.vehicle.lock_rad
         # As pure pursuit steers any vehicle along a path: its own wheelbase times the curvature.
@@ -145,18 +207,26 @@ class PathPolicy(Policy):
     _filter: TemporalFilter | None = field(default=None, repr=False)
     _previous_pose: np.ndarray | None = field(default=None, repr=False)
 
+    views = (LEFT, RIGHT)
+
     def __post_init__(self) -> None:
         if self.temporal_alpha is not None:
             self._filter = TemporalFilter(self.temporal_alpha)
+        self.network = self.model
+
+    def fresh(self) -> PathPolicy:
+        return replace(self, _filter=None, _previous_pose=None)  # __post_init__ gives it its own filter
 
     def reset(self) -> None:
         if self._filter is not None:
             self._filter.reset()
         self._previous_pose = None
 
-    def steer(self, frame: Frame) -> float | None:
-        confidence = self.model([frame.left])[0]  # (H, W) at the camera's size
-        depth = frame.depth
+    def look(self, frames: list[Frame]) -> list[np.ndarray]:
+        return self.model([f.left for f in frames])  # (H, W) path confidence at the camera's size, each
+
+    def act(self, frame: Frame, seen: object) -> float | None:
+        confidence, depth = seen, frame.depth
         if self._filter is not None:
             # The camera's motion since the last step, as wheel odometry or VO would give it.
             moved = np.eye(4) if self._previous_pose is None else np.linalg.inv(self._previous_pose) @ frame.pose

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from offroad_path.drive.course import Course
-from offroad_path.drive.loop import DriveLog, LoopSettings, Setup, drive
+from offroad_path.drive.loop import Drive, DriveLog, LoopSettings, Setup, drive_together
 from offroad_path.drive.policies import OraclePolicy, PathPolicy, PilotNetPolicy, Policy, StereoRig, StraightPolicy
 from offroad_path.drive.vehicle import Vehicle
 from offroad_path.errors import InputError
@@ -27,6 +27,7 @@ from offroad_path.utils.media import VideoFile
 from offroad_path.utils.rules import ConfigValueError
 from offroad_path.world.record import check_rendered_with, rebuild_world
 from offroad_path.world.render import PinholeCamera
+from offroad_path.world.render_torch import torch_device
 from offroad_path.world.scene import World
 from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip
 from offroad_path.world.trajectory import VehicleGeometry
@@ -101,7 +102,7 @@ def pilotnet_checkpoint(path: Path) -> dict:
     return saved
 
 
-def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
+def make_policy(name: str, d, seed: int, params: PostprocessParams, device: str = "cpu") -> Policy:
     if name == "oracle":
         return OraclePolicy(d.lookahead_m)
     if name == "straight":
@@ -114,10 +115,10 @@ def make_policy(name: str, d, seed: int, params: PostprocessParams) -> Policy:
         hp = saved["hyper_parameters"]
         task = SteeringTask(**hp)
         load_weights(task, checkpoint_of(name, d, seed), saved)
-        return PilotNetPolicy(task.eval(), int(hp["width"]), int(hp["height"]), name, task.max_curvature)
+        return PilotNetPolicy(task.to(device).eval(), int(hp["width"]), int(hp["height"]), name, task.max_curvature)
     from offroad_path.inference.runners import TorchModel
 
-    model = TorchModel(checkpoint_of(name, d, seed))
+    model = TorchModel(checkpoint_of(name, d, seed), device)
     alpha = d.temporal_alpha if name.endswith(TEMPORAL) else None
     return PathPolicy(name, model, params, d.lookahead_m, d.threshold, alpha)
 
@@ -132,45 +133,63 @@ class WorldJob:
     disparity: object  # label.disparity
     out_dir: str  # the stage's temporary output folder
     video: bool
+    render: object  # conf/render: the renderer of the drive's views
+    device: str  # drive.device: where the policies' networks run
 
 
 def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
-    """Every argument's policies from every start with every training seed in one world: (argument,
-    log) in a fixed order (seed, argument, policy, start); the plots and the video show the first seed."""
+    """Every argument's policies from every start with every training seed in one world, all in
+    lockstep (loop.drive_together): (argument, log) in a fixed order (seed, argument, policy, start);
+    the plots and the video show the first seed."""
     cv2.setNumThreads(1)  # one process per core
     torch.set_num_threads(1)
     d, world = job.drive_cfg, rebuild_world(job.world_cfg, Path(job.world.folder))
     camera = PinholeCamera.from_fov(d.width, d.height, job.world_cfg.hfov_deg)
-    matcher = sgbm(job.disparity)
     settings = LoopSettings(d.rate_hz, d.speed_mps, d.length_m, d.respawn_m, d.timeout_factor, d.water_intervenes)
-    out: list[tuple[str, DriveLog]] = []
+    baseline, max_distance = job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m
+    rig = StereoRig(world, camera, baseline, max_distance, sgbm(job.disparity), *_renderer(world, job.render))
+    device = str(torch_device(job.device))
     slip = _slip(world, job) if "traction" in d.arguments else None
+    drives: list[Drive] = []
+    labels: list[tuple[str, int, int]] = []  # each drive's (argument, seed, start)
     for seed in job.training_seeds:
-        first = seed == job.training_seeds[0]
         policies: dict[str, Policy] = {}
         for argument, names in d.arguments.items():
             geometry = VehicleGeometry.of(d.other_vehicle) if argument == "vehicle" else VehicleGeometry.of(job.world_cfg.vehicle)
             course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
-            rig = StereoRig(world, camera, job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m, matcher)
             usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)
-            starts = [usable * k / d.starts_per_world for k in range(d.starts_per_world)]
-            logs: dict[str, list[DriveLog]] = {}
             for name in names:
                 if name not in policies:
-                    policies[name] = make_policy(name, d, seed, job.postprocess)
-                for k, start in enumerate(starts):
+                    policies[name] = make_policy(name, d, seed, job.postprocess, device)
+                for k in range(d.starts_per_world):
                     yaw = _yaw_factor(world, slip, job.world.seed, k) if argument == "traction" else None
                     setup = Setup(course, Vehicle(geometry, d.steering_rate_deg_s, yaw), rig, settings)
-                    video = first and job.video and argument == "steering" and k == 0
-                    log = drive(setup, policies[name], start, video)
-                    log.world, log.start, log.seed = job.world.name, k, seed
-                    if video:
-                        _write_video(log, Path(job.out_dir) / "videos" / f"{name}.mp4", d.rate_hz)
-                    logs.setdefault(name, []).append(log)
-                    out.append((argument, log))
-            if first:
-                plot_world(world, course, logs, Path(job.out_dir) / "trajectories" / argument / f"{job.world.name}.png")
+                    video = seed == job.training_seeds[0] and job.video and argument == "steering" and k == 0
+                    drives.append(Drive(setup, policies[name].fresh(), usable * k / d.starts_per_world, video))
+                    labels.append((argument, seed, k))
+    out: list[tuple[str, DriveLog]] = []
+    first: dict[str, dict[str, list[DriveLog]]] = {}  # the first seed's logs per argument and policy, for the plots
+    for one, log, (argument, seed, k) in zip(drives, drive_together(drives), labels, strict=True):
+        log.world, log.start, log.seed = job.world.name, k, seed
+        if one.video:
+            _write_video(log, Path(job.out_dir) / "videos" / f"{log.policy}.mp4", d.rate_hz)
+        if seed == job.training_seeds[0]:
+            first.setdefault(argument, {}).setdefault(log.policy, []).append(log)
+        out.append((argument, log))
+    for argument, logs in first.items():
+        plot_world(world, drives[labels.index((argument, job.training_seeds[0], 0))].setup.course, logs,
+                   Path(job.out_dir) / "trajectories" / argument / f"{job.world.name}.png")  # fmt: skip
     return out
+
+
+def _renderer(world: World, render) -> tuple:
+    """StereoRig's device world and views per batch for conf/render: the torch port on its device, or
+    the reference (None)."""
+    if render.backend == "numpy":
+        return None, render.views_per_batch
+    from offroad_path.world.render_torch import DeviceWorld
+
+    return DeviceWorld(world, torch_device(render.device)), render.views_per_batch
 
 
 def _slip(world: World, job: WorldJob) -> Slip:
