@@ -13,9 +13,10 @@ from offroad_path.drive.course import Course
 from offroad_path.drive.loop import Drive, LoopSettings, Setup, drive, drive_together
 from offroad_path.drive.policies import LEFT, OraclePolicy, Policy, StereoRig, StraightPolicy
 from offroad_path.drive.vehicle import Vehicle
+from offroad_path.drive.worlds import stereo_rig
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.world.render import PinholeCamera
-from offroad_path.world.render_torch import DeviceWorld, torch_device
+from offroad_path.world.render_torch import torch_device
 from offroad_path.world.scene import build_world
 from offroad_path.world.trajectory import VehicleGeometry
 
@@ -93,11 +94,13 @@ def test_two_drives_sharing_one_policy_object_are_refused(world_and_rig):
         drive_together([Drive(setup, policy, 0.0), Drive(setup, policy, 4.0)])
 
 
-def test_the_rig_renders_with_the_torch_port_in_batches(world_and_rig):
-    """The rig's views through the torch port (on the GPU where there is one) agree with the
-    reference's, and a view's bytes do not depend on the batch it renders in."""
-    _, world, rig, _ = world_and_rig
-    ported = StereoRig(world, rig.camera, rig.baseline_m, rig.max_distance_m, rig.matcher, DeviceWorld(world, torch_device("auto")), 2)
+def test_the_rig_renders_with_the_torch_port_in_batches(compose_config, world_and_rig):
+    """The drive stage's rig with render.backend=torch (on the GPU where there is one) renders views
+    that agree with the reference's, and a view's bytes do not depend on the batch it renders in."""
+    cfg, world, rig, _ = world_and_rig
+    config = compose_config("render.backend=torch", "render.views_per_batch=2")
+    ported = stereo_rig(world, rig.camera, cfg, config.label.disparity, config.render)
+    assert ported.device_world.device == torch_device("auto") and ported.views_per_batch == 2
     poses = list(world.poses[[5, 20, 35]])
     reference = np.stack(StereoRig.render_many(rig, poses)).astype(int)
     images = ported.render_many(poses)  # in two batches: 2 views, then 1

@@ -146,17 +146,18 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
     d, world = job.drive_cfg, rebuild_world(job.world_cfg, Path(job.world.folder))
     camera = PinholeCamera.from_fov(d.width, d.height, job.world_cfg.hfov_deg)
     settings = LoopSettings(d.rate_hz, d.speed_mps, d.length_m, d.respawn_m, d.timeout_factor, d.water_intervenes)
-    baseline, max_distance = job.world_cfg.rig.baseline_m, job.world_cfg.max_distance_m
-    rig = StereoRig(world, camera, baseline, max_distance, sgbm(job.disparity), *_renderer(world, job.render))
+    rig = stereo_rig(world, camera, job.world_cfg, job.disparity, job.render)
     device = str(torch_device(job.device))
     slip = _slip(world, job) if "traction" in d.arguments else None
     drives: list[Drive] = []
     labels: list[tuple[str, int, int]] = []  # each drive's (argument, seed, start)
+    courses: dict[str, Course] = {}  # the first seed's, for the plots
     for seed in job.training_seeds:
         policies: dict[str, Policy] = {}
         for argument, names in d.arguments.items():
             geometry = VehicleGeometry.of(d.other_vehicle) if argument == "vehicle" else VehicleGeometry.of(job.world_cfg.vehicle)
             course = Course(world, geometry, d.corridor_m, tuple(d.body_band_m), d.foliage_is_obstacle)
+            courses.setdefault(argument, course)
             usable = max(course.length_m - d.length_m - END_MARGIN_M, 0.0)
             for name in names:
                 if name not in policies:
@@ -177,19 +178,20 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
             first.setdefault(argument, {}).setdefault(log.policy, []).append(log)
         out.append((argument, log))
     for argument, logs in first.items():
-        plot_world(world, drives[labels.index((argument, job.training_seeds[0], 0))].setup.course, logs,
-                   Path(job.out_dir) / "trajectories" / argument / f"{job.world.name}.png")  # fmt: skip
+        plot_world(world, courses[argument], logs, Path(job.out_dir) / "trajectories" / argument / f"{job.world.name}.png")
     return out
 
 
-def _renderer(world: World, render) -> tuple:
-    """StereoRig's device world and views per batch for conf/render: the torch port on its device, or
-    the reference (None)."""
-    if render.backend == "numpy":
-        return None, render.views_per_batch
-    from offroad_path.world.render_torch import DeviceWorld
+def stereo_rig(world: World, camera: PinholeCamera, world_cfg, disparity, render) -> StereoRig:
+    """The driven vehicle's rig (the world's baseline and range, label.disparity's matcher), rendering
+    with conf/render's backend: the torch port on its device, views_per_batch at once, or the reference."""
+    device_world = None
+    if render.backend == "torch":
+        from offroad_path.world.render_torch import DeviceWorld
 
-    return DeviceWorld(world, torch_device(render.device)), render.views_per_batch
+        device_world = DeviceWorld(world, torch_device(render.device))
+    baseline, max_distance = world_cfg.rig.baseline_m, world_cfg.max_distance_m
+    return StereoRig(world, camera, baseline, max_distance, sgbm(disparity), device_world, render.views_per_batch)
 
 
 def _slip(world: World, job: WorldJob) -> Slip:
