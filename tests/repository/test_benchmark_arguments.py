@@ -27,6 +27,19 @@ def test_a_bad_argument_is_one_line_and_exit_2(script, arguments, says, tmp_path
     assert not (tmp_path / "w").exists()
 
 
+@pytest.mark.parametrize(
+    ("arguments", "says"),
+    [
+        (["--models", "nonet"], "--models: unknown 'nonet'; valid: fcn, segnet, unet"),
+        (["--processes", "2", "0"], "--processes: 0 is not a positive count"),
+    ],
+)
+def test_the_gpu_probe_refuses_a_bad_argument_before_any_step(arguments, says, tmp_path):
+    run = command(str(ROOT / "benchmarks" / "gpu_training.py"), *arguments, "--json", tmp_path / "figures.json")
+    assert run.returncode == 2 and run.stderr.strip() == f"error: {says}" and run.stdout == ""
+    assert not (tmp_path / "figures.json").exists()
+
+
 @pytest.mark.parametrize("script", ["recipe_search.py", "learning_curve.py"])
 def test_a_development_set_of_one_world_is_refused_before_training(script, tmp_path):
     """Once every search on one development world trained, then failed on its interval (AttributeError)."""
@@ -45,7 +58,7 @@ def test_a_development_set_of_one_world_is_refused_before_training(script, tmp_p
     assert not (tmp_path / "w").exists()
 
 
-@pytest.mark.parametrize("script", ["label_cpu.py", "learning_curve.py", "seed_spread.py", "pipeline_time.py"])
+@pytest.mark.parametrize("script", ["label_cpu.py", "learning_curve.py", "seed_spread.py", "pipeline_time.py", "gpu_training.py"])
 def test_help_prints_and_writes_nothing(script, tmp_path):
     """`--help` is help: once, a benchmark took it for its work folder and ran, writing into `./--help`."""
     run = command(str(ROOT / "benchmarks" / script), "--help", cwd=tmp_path)
