@@ -32,11 +32,8 @@ ROOT=$(dirname "$PIPELINE")
 for made in "$ROOT/data" "$ROOT/metrics" "$ROOT/dvc.lock"; do
   if [ -e "$made" ]; then echo "error: $made: exists; a run from nothing starts without it (move it away)" >&2; exit 2; fi
 done
-if [ "$WHEELHOUSE" != none ]; then
-  ls "$WHEELHOUSE"/*.whl >/dev/null 2>&1 || { echo "error: $WHEELHOUSE: holds no wheels (build them with wheelhouse.sh)" >&2; exit 2; }
-  python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site "$WHEELHOUSE"/*.whl
-  export PYTHONPATH=/tmp/site:$PWD/src PATH=/tmp/site/bin:$PATH  # /tmp/site first: its versions win
-fi
+. gpu/wheelhouse_env.sh
+use_wheelhouse "$WHEELHOUSE"
 export OFFROAD_MLFLOW=false  # the presets read it (mlflow.enabled): no tracking store on the host
 if ! git rev-parse --is-inside-work-tree >/dev/null 2>&1; then  # DVC needs a repository: a copy of the working tree has none
   git init -q && git add -A >/dev/null && git -c user.name=repro -c user.email=repro@localhost commit -qm "the run's tree"

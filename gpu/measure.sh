@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# What sizing the GPU preset for ten minutes needs, measured in one go on a GPU host without network
+# (docs/scaling.md): the torch renderer's stereo frames/s (benchmarks/render_speed.py), the
+# trainings' images/s by batch size and with processes side by side (benchmarks/gpu_training.py),
+# then the preset's pipeline from nothing (gpu/repro.sh) for the rest of --limit seconds, stopped
+# there with the times of the stages it finished and the GPU's utilisation kept. Everything it
+# measured is copied into --out.
+#
+#   bash gpu/measure.sh [--wheelhouse .whl] [--limit 540] [--jobs 4] --out DIR
+#   bash gpu/measure.sh --wheelhouse none --rehearse --limit 120 --out /tmp/m   # the same steps on any CPU, tiny
+#
+# --rehearse: the tour's pipeline and tiny benchmark sizes on the CPU, to check the script before a GPU is at hand.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+WHEELHOUSE=.whl LIMIT=540 JOBS=4 OUT_DIR="" REHEARSE=0
+while [ $# -gt 0 ]; do
+  case $1 in
+    --wheelhouse) WHEELHOUSE=$2; shift 2 ;;
+    --limit) LIMIT=$2; shift 2 ;;
+    --jobs) JOBS=$2; shift 2 ;;
+    --out) OUT_DIR=$2; shift 2 ;;
+    --rehearse) REHEARSE=1; shift ;;
+    *) echo "error: $1: unknown argument (--wheelhouse DIR, --limit S, --jobs N, --out DIR, --rehearse)" >&2; exit 2 ;;
+  esac
+done
+[ -n "$OUT_DIR" ] || { echo "error: --out: required (the folder the figures are copied into)" >&2; exit 2; }
+PIPELINE=gpu/dvc.yaml RENDER=(--set render.backend=torch) TRAINING=()
+if [ "$REHEARSE" = 1 ]; then
+  PIPELINE=tour/dvc.yaml
+  RENDER=(--sequences 1 --frames 4 --set render.backend=torch render.device=cpu world.width=128 world.height=72)
+  TRAINING=(--width 0.125 --size 64x36 --batches 2 4 --processes 1 2 --seconds 1)
+fi
+ROOT=$(dirname "$PIPELINE")
+for made in "$ROOT/data" "$ROOT/metrics" "$ROOT/dvc.lock"; do  # checked by gpu/repro.sh too: here before any minute is spent
+  if [ -e "$made" ]; then echo "error: $made: exists; a run from nothing starts without it (move it away)" >&2; exit 2; fi
+done
+. gpu/wheelhouse_env.sh
+use_wheelhouse "$WHEELHOUSE"
+mkdir -p "$OUT_DIR"
+START=$SECONDS
+export PYTHONUNBUFFERED=1
+python3 benchmarks/render_speed.py "${RENDER[@]}" 2>&1 | tee "$OUT_DIR/render_speed.txt"
+python3 benchmarks/gpu_training.py "${TRAINING[@]}" --json "$OUT_DIR/gpu_training.json" 2>&1 | tee "$OUT_DIR/gpu_training.txt"
+LEFT=$((LIMIT - (SECONDS - START)))
+echo "the pipeline from nothing, for at most ${LEFT} s"
+status=0
+timeout "$LEFT" bash gpu/repro.sh --wheelhouse none --pipeline "$PIPELINE" --jobs "$JOBS" || status=$?
+cp "$ROOT"/metrics/pipeline_time.json "$ROOT"/pipeline_time.log "$OUT_DIR"/ 2>/dev/null || true
+[ -f "$ROOT/metrics/gpu_utilisation.csv" ] && cp "$ROOT/metrics/gpu_utilisation.csv" "$OUT_DIR"/
+echo "pipeline exit $status (124: stopped at the limit)"
