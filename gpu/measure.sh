@@ -7,9 +7,10 @@
 # measured is copied into --out.
 #
 #   bash gpu/measure.sh [--wheelhouse .whl] [--limit 540] [--jobs 4] --out DIR
-#   bash gpu/measure.sh --wheelhouse none --rehearse --limit 120 --out /tmp/m   # the same steps on any CPU, tiny
+#   bash gpu/measure.sh --wheelhouse none --rehearse --limit 300 --out /tmp/m   # the same steps on any machine, tiny
 #
-# --rehearse: the tour's pipeline and tiny benchmark sizes on the CPU, to check the script before a GPU is at hand.
+# --rehearse: rehearsal/dvc.yaml (experiment=rehearsal: the GPU preset's settings at the tour's sizes)
+# and tiny benchmark sizes, on the GPU where there is one, else the CPU: the script checked before a GPU is at hand.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WHEELHOUSE=.whl LIMIT=540 JOBS=4 OUT_DIR="" REHEARSE=0
@@ -26,8 +27,8 @@ done
 [ -n "$OUT_DIR" ] || { echo "error: --out: required (the folder the figures are copied into)" >&2; exit 2; }
 PIPELINE=gpu/dvc.yaml RENDER=(--set render.backend=torch) TRAINING=()
 if [ "$REHEARSE" = 1 ]; then
-  PIPELINE=tour/dvc.yaml
-  RENDER=(--sequences 1 --frames 4 --set render.backend=torch render.device=cpu world.width=128 world.height=72)
+  PIPELINE=rehearsal/dvc.yaml
+  RENDER=(--sequences 1 --frames 4 --set render.backend=torch world.width=128 world.height=72)
   TRAINING=(--width 0.125 --size 64x36 --batches 2 4 --processes 1 2 --seconds 1)
 fi
 ROOT=$(dirname "$PIPELINE")

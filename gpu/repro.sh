@@ -11,7 +11,7 @@
 #
 # --jobs 1 runs the stages one by one, as `dvc repro gpu/dvc.yaml` does.
 # --wheelhouse none uses the Python environment as it is (a host with every package installed).
-# --pipeline tour/dvc.yaml rehearses the same steps on the tour's tiny worlds, on any CPU.
+# --pipeline rehearsal/dvc.yaml rehearses it: the GPU preset's settings on the tour's tiny worlds, on any machine.
 # It refuses to start over outputs already there (the pipeline's data/, metrics/ or lock):
 # it never deletes a run; move or remove it yourself.
 set -euo pipefail

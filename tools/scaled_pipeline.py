@@ -1,12 +1,13 @@
 """The scaled pipelines: the main dvc.yaml's stages under a preset, every output under a folder of their own.
 
-    python tools/scaled_pipeline.py    # rewrites gpu/dvc.yaml and tour/dvc.yaml from dvc.yaml
+    python tools/scaled_pipeline.py    # rewrites gpu/, tour/ and rehearsal/dvc.yaml from dvc.yaml
     dvc repro gpu/dvc.yaml             # the whole pipeline at the GPU preset's sizes
     dvc repro tour/dvc.yaml            # the five-minute tour: every stage on tiny worlds (a smoke run)
+    dvc repro rehearsal/dvc.yaml       # the GPU preset's settings at the tour's sizes, on any machine
 
 One pipeline to edit (dvc.yaml); these files are made from it (tests/config/test_presets.py checks that they
 are up to date): each stage runs in the checkout (wdir ..) with `experiment=<preset> paths.root=<folder>`,
-reads the checkout's code and configs and conf/experiment/<preset>.yaml, and writes <folder>/data/ and
+reads the checkout's code and configs and conf/experiment/<preset>.yaml (and the presets it is made of), and writes <folder>/data/ and
 <folder>/metrics/, so the committed run stays as it is. The grid lists come from <folder>/params.yaml
 (the preset's seeds).
 """
@@ -19,13 +20,14 @@ from pathlib import Path
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-PIPELINES = {"gpu": "gpu", "tour": "tour"}  # folder: preset (conf/experiment/<preset>.yaml)
+# folder: its preset (conf/experiment/<preset>.yaml), then the presets that one's defaults list
+PIPELINES = {"gpu": ("gpu",), "tour": ("tour",), "rehearsal": ("rehearsal", "gpu", "tour")}
 OUTPUT = re.compile(r"(^|[\s=])((?:data|metrics)/)")
 
 
 def header(folder: str) -> str:
     return f"""# Made by `python tools/scaled_pipeline.py` from dvc.yaml: edit that, then rerun it.
-# dvc.yaml's stages under experiment={PIPELINES[folder]} (conf/experiment/{PIPELINES[folder]}.yaml), outputs under
+# dvc.yaml's stages under experiment={PIPELINES[folder][0]} (conf/experiment/{PIPELINES[folder][0]}.yaml), outputs under
 # {folder}/data and {folder}/metrics:  dvc repro {folder}/dvc.yaml
 """
 
@@ -41,13 +43,13 @@ def _entries(items: list, folder: str) -> list:
 
 def scaled(pipeline: dict, folder: str) -> dict:
     """The scaled pipeline's dvc.yaml (as a dict) from the main one's."""
-    preset, stages = PIPELINES[folder], {}
+    presets, stages = PIPELINES[folder], {}
     for name, stage in pipeline["stages"].items():
         out = {"wdir": "..", **{k: v for k, v in stage.items() if k in ("matrix", "foreach", "do")}}
-        cmd = re.sub(r"^(python -m offroad_path\.\w+)", rf"\1 experiment={preset} paths.root={folder}", " ".join(stage["cmd"].split()))
+        cmd = re.sub(r"^(python -m offroad_path\.\w+)", rf"\1 experiment={presets[0]} paths.root={folder}", " ".join(stage["cmd"].split()))
         out["cmd"] = _moved(cmd, folder)
         out["deps"] = _entries(stage.get("deps", []), folder)
-        out["params"] = [*stage.get("params", []), {f"conf/experiment/{preset}.yaml": None}]
+        out["params"] = [*stage.get("params", []), *({f"conf/experiment/{preset}.yaml": None} for preset in presets)]
         for key in ("outs", "metrics", "plots"):
             if key in stage:
                 out[key] = _entries(stage[key], folder)

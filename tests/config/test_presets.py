@@ -8,6 +8,7 @@ import json
 
 import pytest
 from helpers import hand_counted_iou
+from omegaconf import OmegaConf
 
 from offroad_path.split import split
 from offroad_path.train import train
@@ -146,23 +147,41 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     assert {key: list(gpu.evaluate[key]) for key in grid} == grid
 
 
-def test_the_tour_is_every_stage_on_tiny_worlds_into_its_own_folder(compose_config):
-    """tour/dvc.yaml: dvc.yaml's stages under experiment=tour (the suite's tiny repro runs the same
-    preset, tests/repository/test_pipeline_dvc.py), outputs under tour/, an MLflow experiment of its own."""
+@pytest.mark.parametrize("folder", ["tour", "rehearsal"])
+def test_the_tour_and_the_rehearsal_are_every_stage_on_tiny_worlds_into_their_own_folder(compose_config, folder):
+    """tour/dvc.yaml and rehearsal/dvc.yaml: dvc.yaml's stages under experiment=tour (the suite's tiny
+    repro runs the same preset, tests/repository/test_pipeline_dvc.py) or experiment=rehearsal, outputs
+    under their folder, an MLflow experiment of their own."""
     import yaml
     from scaled_pipeline import ROOT, render
 
-    tour = compose_config("experiment=tour")
-    assert (ROOT / "tour" / "dvc.yaml").read_text() == render("tour"), "tour/dvc.yaml is stale: python tools/scaled_pipeline.py"
-    pipeline, main = yaml.safe_load(render("tour")), yaml.safe_load((ROOT / "dvc.yaml").read_text())
+    preset = compose_config(f"experiment={folder}")
+    assert (ROOT / folder / "dvc.yaml").read_text() == render(folder), f"{folder}/dvc.yaml is stale: python tools/scaled_pipeline.py"
+    pipeline, main = yaml.safe_load(render(folder)), yaml.safe_load((ROOT / "dvc.yaml").read_text())
     assert list(pipeline["stages"]) == list(main["stages"])
     for name, stage in pipeline["stages"].items():
-        assert "experiment=tour paths.root=tour" in stage["cmd"], name
+        assert f"experiment={folder} paths.root={folder}" in stage["cmd"], name
         outputs = [next(iter(o)) if isinstance(o, dict) else o for key in ("outs", "metrics") for o in stage.get(key, [])]
-        assert outputs and all(o.startswith(("tour/data/", "tour/metrics/")) for o in outputs), name
-    grid = yaml.safe_load((ROOT / "tour" / "params.yaml").read_text())
-    assert {key: list(tour.evaluate[key]) for key in grid} == grid
-    assert tour.mlflow.experiment != compose_config().mlflow.experiment and tour.trainer.max_epochs == 1
+        assert outputs and all(o.startswith((f"{folder}/data/", f"{folder}/metrics/")) for o in outputs), name
+    grid = yaml.safe_load((ROOT / folder / "params.yaml").read_text())
+    assert {key: list(preset.evaluate[key]) for key in grid} == grid
+    assert preset.mlflow.experiment not in (compose_config().mlflow.experiment, compose_config("experiment=gpu").mlflow.experiment)
+    assert preset.trainer.max_epochs == 1 and preset.world.frames == compose_config("experiment=tour").world.frames
+
+
+def test_the_rehearsal_is_the_gpu_presets_settings_at_the_tours_sizes(compose_config):
+    """experiment=rehearsal runs what the GPU preset runs that can fail on a GPU host (the torch renderer,
+    bf16, the loader's workers, every network, the closed loop's networks on auto) on tiny worlds, and
+    on a CPU where there is no GPU."""
+    gpu, tour, rehearsal = (compose_config(f"experiment={name}") for name in ("gpu", "tour", "rehearsal"))
+    same = ("render", "drive.device", "trainer.precision", "data.num_workers", "data.pin_memory", "synthesize.workers",
+            "label.workers", "drive.workers", "evaluate.architectures", "evaluate.pretrainings", "world.appearance")  # fmt: skip
+    for key in same:
+        assert OmegaConf.select(rehearsal, key) == OmegaConf.select(gpu, key), key
+    sizes = ("world.frames", "world.width", "synthesize.sequences", "synthesize.test_worlds.min_blocks", "data.width")
+    for key in (*sizes, "synthesize.test_worlds.stress_sets", "model.width", "drive.length_m", "drive.worlds", "trainer.max_epochs"):
+        assert OmegaConf.select(rehearsal, key) == OmegaConf.select(tour, key), key
+    assert gpu.trainer.accelerator == "gpu" and rehearsal.trainer.accelerator == "auto"
 
 
 def test_the_gpu_and_tour_presets_leave_mlflow_off_when_the_host_says_so(monkeypatch):
