@@ -20,6 +20,9 @@ def pages(readme: Path = ROOT / "README.md", results: Path = ROOT / "docs" / "re
 
 def test_the_readme_results_are_the_committed_metrics():
     assert main(["--check", *pages()]) == 0
+    for page in (ROOT / "docs").glob("results-*.md"):  # a scaled pipeline's committed run (docs/results-gpu.md), where there is one
+        pipeline = page.stem.removeprefix("results-")
+        assert main(["--check", "--pipeline", pipeline, "--results", str(page), "--metrics", str(ROOT / pipeline / "metrics")]) == 0
     summary, full = generated(ROOT / "metrics"), generated(ROOT / "metrics", full=True)
     assert summary in (ROOT / "README.md").read_text() and full in (ROOT / "docs" / "results.md").read_text()
     assert "Primary questions" in summary and "Exploratory comparisons" not in summary and "Exploratory comparisons" in full
@@ -47,6 +50,34 @@ def test_a_readme_with_one_number_changed_fails_the_check(tmp_path, capsys):
     assert "README.md: its results disagree with" in capsys.readouterr().err
     assert main(pages(tmp_path / "README.md", tmp_path / "results.md")) == 0  # regenerated
     assert (tmp_path / "README.md").read_text() == readme
+
+
+def test_a_scaled_pipelines_page_is_made_beside_the_laptops_with_its_stage_times(tmp_path, capsys):
+    """--pipeline tour: docs/results-tour.md from tour/metrics, under experiment=tour's settings, as
+    --pipeline gpu makes docs/results-gpu.md (here the committed metrics, whose primaries are the tour's,
+    with a stage-time file as tools/parallel_repro.py writes one); the README untouched."""
+    import json
+    import shutil
+
+    metrics = tmp_path / "metrics"
+    shutil.copytree(ROOT / "metrics", metrics)
+    timing = {"machine": "a test host", "total_s": 125.0, "jobs": 4, "complete": False, "unfinished": ["drive"],
+              "stages": {"synthesize": 60.0, "label": 20.5}, "spans": {"synthesize": [0.0, 60.0], "label": [60.0, 80.5]}}  # fmt: skip
+    (metrics / "pipeline_time.json").write_text(json.dumps(timing))
+    page, readme = tmp_path / "results-tour.md", (ROOT / "README.md").read_text()
+    arguments = ["--pipeline", "tour", "--metrics", str(metrics), "--results", str(page), "--readme", str(tmp_path / "README.md")]
+    assert main(arguments) == 0 and not (tmp_path / "README.md").exists()
+    text = page.read_text()
+    assert text.startswith("# Results of the `experiment=tour` run\n") and BEGIN in text and END in text
+    assert "The `experiment=tour` run: `dvc repro tour/dvc.yaml` (`tour/dvc.lock`, `tour/metrics/`" in text
+    assert "stopped before drive finished, 2 min 5 s on a test host, up to 4 stages at once" in text
+    assert "| synthesize | 0 | 60.0 |\n| label | 60 | 20.5 |" in text
+    assert generated(metrics, full=True, pipeline="tour") in text
+    assert main(["--check", *arguments]) == 0
+    timing["spans"]["label"] = [60.0, 81.5]
+    (metrics / "pipeline_time.json").write_text(json.dumps(timing))
+    assert main(["--check", *arguments]) == 1 and "results-tour.md: its results disagree with" in capsys.readouterr().err
+    assert (ROOT / "README.md").read_text() == readme
 
 
 def test_the_block_needs_both_markers():

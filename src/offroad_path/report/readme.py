@@ -4,6 +4,7 @@ copied by hand or quotes an older run.
 
     python -m offroad_path.report.readme            # rewrite the blocks between the markers
     python -m offroad_path.report.readme --check    # exit 1 when either disagrees with metrics/
+    python -m offroad_path.report.readme --pipeline gpu   # docs/results-gpu.md from gpu/metrics/ (experiment=gpu)
 
 The blocks are offroad_path.report.summary's, whose tables are the ones evaluate's and the drive's
 reports render (report.rendering, every table built by report.tables.grid). Nothing here reads the
@@ -31,13 +32,14 @@ def with_results(readme: str, block: str, path: Path = Path("README.md")) -> str
     return f"{head}{BEGIN}\n\n{block}\n{END}{rest.split(END, 1)[1]}"
 
 
-def generated(metrics_dir: Path, full: bool = False) -> str:
-    """The README's block (full: docs/results.md's) from the metrics in metrics_dir."""
+def generated(metrics_dir: Path, full: bool = False, pipeline: str = "") -> str:
+    """The README's block (full: docs/results.md's) from the metrics in metrics_dir; pipeline: a scaled
+    pipeline's folder, whose preset (experiment=<pipeline>) wrote them."""
     read = {name: json.loads((metrics_dir / f"{name}.json").read_text()) for name in ("evaluation", "label")}
     drive = json.loads((metrics_dir / "drive.json").read_text()) if (metrics_dir / "drive.json").is_file() else None
     from offroad_path.config import load_config
 
-    e = load_config().evaluate  # the committed run's: dvc.lock tracks conf/evaluate
+    e = load_config(*([f"experiment={pipeline}"] if pipeline else [])).evaluate  # the run's: its lock tracks conf/evaluate
     files = {seed: metrics_dir / "steering" / f"seed{seed}.json" for seed in e.seeds}
     steering = [{**json.loads(path.read_text()), "seed": seed} for seed, path in files.items() if path.is_file()]
     variants = {}  # the PilotNets only the drive uses, once per drive seed
@@ -55,26 +57,37 @@ def generated(metrics_dir: Path, full: bool = False) -> str:
         temporal_alpha=e.temporal.alpha,
         variants=variants,
         timing=json.loads(timed.read_text()) if (timed := metrics_dir / "pipeline_time.json").is_file() else None,
+        pipeline=pipeline,
     )
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--readme", type=Path, default=Path("README.md"))
-    parser.add_argument("--results", type=Path, default=Path("docs/results.md"), help="every table, between the same markers")
-    parser.add_argument("--metrics", type=Path, default=Path("metrics"))
+    parser.add_argument("--results", type=Path, help="every table, between the same markers (docs/results.md; docs/results-<pipeline>.md)")
+    parser.add_argument("--metrics", type=Path, help="metrics/ (<pipeline>/metrics/ with --pipeline)")
     parser.add_argument(
         "--check", action="store_true", help="exit 1 when the README's or the results page's tables differ from the metrics"
     )
+    parser.add_argument("--pipeline", default="", help="a scaled pipeline's folder (gpu): its results page alone, from its metrics")
     args = parser.parse_args(argv)
+    if args.pipeline:  # the page beside the laptop's, made on its first run; the README keeps the committed run's summary
+        metrics = args.metrics or Path(args.pipeline) / "metrics"
+        results = args.results or Path("docs") / f"results-{args.pipeline}.md"
+        if not results.is_file() and not args.check:
+            results.write_text(f"# Results of the `experiment={args.pipeline}` run\n\n{BEGIN}\n{END}\n")
+        pages = [(results, True)]
+    else:
+        metrics = args.metrics or Path("metrics")
+        pages = [(args.readme, False), (args.results or Path("docs") / "results.md", True)]
     status = 0
-    for path, full in ((args.readme, False), (args.results, True)):
+    for path, full in pages:
         current = path.read_text()
-        wanted = with_results(current, generated(args.metrics, full), path)
+        wanted = with_results(current, generated(metrics, full, args.pipeline), path)
         if not args.check:
             path.write_text(wanted)
         elif wanted != current:
-            print(f"{path}: its results disagree with {args.metrics}/ (run python -m offroad_path.report.readme)", file=sys.stderr)
+            print(f"{path}: its results disagree with {metrics}/ (run python -m offroad_path.report.readme)", file=sys.stderr)
             status = 1
     return status
 

@@ -37,23 +37,21 @@ def results_markdown(  # noqa: PLR0913
     temporal_alpha: float = 0.5,
     variants: dict[str, list[dict]] | None = None,
     timing: dict | None = None,
+    pipeline: str = "",
 ) -> str:
     """The results' body (between the markers) from the metrics files (steering: PilotNet's metrics per
     training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
     evaluate.bootstrap.resamples of the run that wrote them; conclusions: its evaluate.conclusions (the
     primaries). full: every table (docs/results.md); else the README's summary: Table 5.1, the primaries,
-    the baselines and the stress sets."""
+    the baselines and the stress sets. pipeline: a scaled pipeline's folder (gpu: `dvc repro
+    gpu/dvc.yaml` under experiment=gpu); empty for the committed laptop run."""
     u = evaluation.get("uncertainty", {})
     blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
     worlds = u.get("test_set", {}).get("worlds", "n/a")
     everything = evaluation.get("by_condition", {}).get("all", {})
     out = [
-        "The committed run: `dvc repro` of the embedded default on a 2-core CPU (`dvc.lock`, `metrics/`; "
-        + ("the evaluate stage's own report is `data/evaluation/results.md`" if full else "every other table: `docs/results.md`")
-        + "). Generated from `metrics/` (`python -m offroad_path.report.readme`; a test fails when it disagrees with them). "
-        "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
-        "the stress sets, each scored on its own.\n",
-        *([_timing_sentence(timing)] if full and timing else []),
+        _provenance(full, pipeline),
+        *([_timing_sentence(timing, pipeline)] if full and timing else []),
         f"Labels: {label['labels']} from {label['sequences']} rendered sequences, {label['segments_dropped']} segments dropped; VO drift "
         f"over 20 m segments {label['translation_drift_pct']:.2f} % (worst sequence {label['translation_drift_pct_worst']:.2f} %), "
         f"{label['rotation_drift_deg_per_m']:.4f} deg/m"
@@ -97,11 +95,38 @@ def results_markdown(  # noqa: PLR0913
     return "\n".join(out).rstrip("\n") + "\n"
 
 
-def _timing_sentence(timing: dict) -> str:
-    minutes, seconds = divmod(round(timing["total_s"]), 60)
+def _provenance(full: bool, pipeline: str) -> str:
+    if not pipeline:
+        return (
+            "The committed run: `dvc repro` of the embedded default on a 2-core CPU (`dvc.lock`, `metrics/`; "
+            + ("the evaluate stage's own report is `data/evaluation/results.md`" if full else "every other table: `docs/results.md`")
+            + "). Generated from `metrics/` (`python -m offroad_path.report.readme`; a test fails when it disagrees with them). "
+            "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
+            "the stress sets, each scored on its own.\n"
+        )
     return (
-        f"Time: the last `dvc repro` from nothing took {minutes} min {seconds} s on a {timing['machine']} "
-        f"(`metrics/pipeline_time.json`, written by `python benchmarks/pipeline_time.py --json`, with every stage's seconds).\n"
+        f"The `experiment={pipeline}` run: `dvc repro {pipeline}/dvc.yaml` (`{pipeline}/dvc.lock`, `{pipeline}/metrics/`; the "
+        f"evaluate stage's own report is `{pipeline}/data/evaluation/results.md`). Generated from `{pipeline}/metrics/` (`python -m "
+        f"offroad_path.report.readme --pipeline {pipeline}`). Every headline figure is the main test set's: held-out worlds drawn "
+        "as the training drives are; the hard cases are the stress sets, each scored on its own.\n"
+    )
+
+
+def _timing_sentence(timing: dict, pipeline: str = "") -> str:
+    minutes, seconds = divmod(round(timing["total_s"]), 60)
+    if not pipeline:
+        return (
+            f"Time: the last `dvc repro` from nothing took {minutes} min {seconds} s on a {timing['machine']} "
+            f"(`metrics/pipeline_time.json`, written by `python benchmarks/pipeline_time.py --json`, with every stage's seconds).\n"
+        )
+    # A scaled run's times come from tools/parallel_repro.py: each stage's start and end on the run's clock.
+    finished = "from nothing" if timing.get("complete", True) else f"stopped before {', '.join(timing['unfinished'])} finished"
+    rows = [f"| {stage} | {start:.0f} | {end - start:.1f} |" for stage, (start, end) in timing.get("spans", {}).items()]
+    return (
+        f"Time: `dvc repro {pipeline}/dvc.yaml` {finished}, {minutes} min {seconds} s on {timing['machine']}, up to "
+        f"{timing.get('jobs', 1)} stages at once (`{pipeline}/metrics/pipeline_time.json`, written by `tools/parallel_repro.py`):\n\n"
+        + "\n".join(["| stage | started (s) | seconds |", "| --- | --- | --- |", *rows])
+        + "\n"
     )
 
 
