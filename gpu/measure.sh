@@ -4,7 +4,8 @@
 # trainings' images/s by batch size and with processes side by side (benchmarks/gpu_training.py),
 # then the preset's pipeline from nothing (gpu/repro.sh) for the rest of --limit seconds, stopped
 # there with the times of the stages it finished and the GPU's utilisation kept. Everything it
-# measured is copied into --out.
+# measured lands in --out: the benchmarks' output, and run.tgz with the run's lock, metrics, log and
+# (after a complete run) its results page, docs/results-<pipeline>.md's text.
 #
 #   bash gpu/measure.sh [--wheelhouse .whl] [--limit 540] [--jobs 4] --out DIR
 #   bash gpu/measure.sh --wheelhouse none --rehearse --limit 300 --out /tmp/m   # the same steps on any machine, tiny
@@ -46,6 +47,11 @@ LEFT=$((LIMIT - (SECONDS - START)))
 echo "the pipeline from nothing, for at most ${LEFT} s"
 status=0
 timeout "$LEFT" bash gpu/repro.sh --wheelhouse none --pipeline "$PIPELINE" --jobs "$JOBS" || status=$?
-cp "$ROOT"/metrics/pipeline_time.json "$ROOT"/pipeline_time.log "$OUT_DIR"/ 2>/dev/null || true
-[ -f "$ROOT/metrics/gpu_utilisation.csv" ] && cp "$ROOT/metrics/gpu_utilisation.csv" "$OUT_DIR"/
 echo "pipeline exit $status (124: stopped at the limit)"
+if [ "$status" = 0 ]; then  # a complete run: its results page, to commit beside the laptop's
+  python3 -m offroad_path.report.readme --pipeline "$ROOT" --results "$ROOT/results-$ROOT.md"
+fi
+# One archive (a GPU host returns few files): the lock, the metrics with the stage times and the GPU's
+# utilisation, the log and, after a complete run, the results page.
+tar czf "$OUT_DIR/run.tgz" --ignore-failed-read "$ROOT/dvc.lock" "$ROOT/metrics" "$ROOT/pipeline_time.log" "$ROOT/results-$ROOT.md" 2>/dev/null || true
+tar tzf "$OUT_DIR/run.tgz"
