@@ -148,12 +148,12 @@ def drive_together(drives: list[Drive]) -> list[DriveLog]:
 
 
 def _sharing_a_network(drives: list[Drive]) -> list[list[int]]:
-    """Indices of the drives grouped by the network their policy looks through (one group per policy
-    without one)."""
-    groups: dict[object, list[int]] = {}
+    """Indices of the drives grouped by the kind of policy and the network it looks through (one group
+    per policy without one)."""
+    groups: dict[tuple, list[int]] = {}
     for i, d in enumerate(drives):
         network = d.policy.network
-        groups.setdefault(("network", id(network)) if network is not None else ("alone", i), []).append(i)
+        groups.setdefault((type(d.policy), id(network)) if network is not None else ("alone", i), []).append(i)
     return list(groups.values())
 
 
