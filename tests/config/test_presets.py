@@ -129,6 +129,7 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     assert gpu.synthesize.sequences >= 10 * laptop.synthesize.sequences and gpu.model.width == 1.0
     assert gpu.data.width * gpu.data.height > laptop.data.width * laptop.data.height and gpu.data.num_workers > 0
     assert gpu.synthesize.workers == gpu.label.workers == gpu.drive.workers == 0  # 0: one per core
+    assert (gpu.drive.width, gpu.drive.height) == (gpu.world.width, gpu.world.height)  # the camera the networks trained on
     # Every core, or the share tools/parallel_repro.py gives each stage it runs at once (the tests' config sets 1).
     threads = OmegaConf.create({"threads": yaml.safe_load((ROOT / "conf" / "experiment" / "gpu.yaml").read_text())["threads"]})
     monkeypatch.delenv("OFFROAD_THREADS", raising=False)
