@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from helpers import hand_counted_iou
 from omegaconf import OmegaConf
 
 from offroad_path.split import split
 from offroad_path.train import train
+from offroad_path.world.trajectory import frame_arc_lengths
 
 # "Training continues until ... 60,000 iterations for SegNet, 30,000 iterations for U-Net, and
 # 100,000 iterations for FCN"; "for both SegNet and U-Net ... 1x10^-3, while for FCN it was
@@ -130,6 +132,11 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     assert gpu.data.width * gpu.data.height > laptop.data.width * laptop.data.height and gpu.data.num_workers > 0
     assert gpu.synthesize.workers == gpu.label.workers == gpu.drive.workers == 0  # 0: one per core
     assert (gpu.drive.width, gpu.drive.height) == (gpu.world.width, gpu.world.height)  # the camera the networks trained on
+    for preset in (laptop, gpu, compose_config("experiment=full")):  # every test world holds the drive's route (drive.check_worlds)
+        w = preset.world
+        speeds = (w.speed_min_mps, w.speed_max_mps)
+        drives = [frame_arc_lengths(np.random.default_rng(seed), w.frames, w.fps, speeds)[-1] for seed in range(500)]
+        assert preset.drive.length_m + preset.drive.respawn_m < min(drives), preset.experiment_name
     # Every core, or the share tools/parallel_repro.py gives each stage it runs at once (the tests' config sets 1).
     threads = OmegaConf.create({"threads": yaml.safe_load((ROOT / "conf" / "experiment" / "gpu.yaml").read_text())["threads"]})
     monkeypatch.delenv("OFFROAD_THREADS", raising=False)
