@@ -4,7 +4,7 @@ copied by hand or quotes an older run.
 
     python -m offroad_path.report.readme            # rewrite the blocks between the markers
     python -m offroad_path.report.readme --check    # exit 1 when either disagrees with metrics/
-    python -m offroad_path.report.readme --pipeline gpu   # docs/results-gpu.md from gpu/metrics/ (experiment=gpu)
+    python -m offroad_path.report.readme --pipeline gpu   # the GPU run's page beside docs/results.md, from gpu/metrics/
 
 The blocks are offroad_path.report.summary's, whose tables are the ones evaluate's and the drive's
 reports render (report.rendering, every table built by report.tables.grid). Nothing here reads the
@@ -64,7 +64,7 @@ def generated(metrics_dir: Path, full: bool = False, pipeline: str = "") -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--readme", type=Path, default=Path("README.md"))
-    parser.add_argument("--results", type=Path, help="every table, between the same markers (docs/results.md; docs/results-<pipeline>.md)")
+    parser.add_argument("--results", type=Path, help="every table between the markers (docs/results.md; --pipeline P: results-P.md)")
     parser.add_argument("--metrics", type=Path, help="metrics/ (<pipeline>/metrics/ with --pipeline)")
     parser.add_argument(
         "--check", action="store_true", help="exit 1 when the README's or the results page's tables differ from the metrics"

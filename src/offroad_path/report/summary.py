@@ -20,7 +20,7 @@ from offroad_path.report.rendering import (
     stress_markdown,
     temporal_markdown,
 )
-from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR
+from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR, grid
 from offroad_path.statistics.counts import power_sentence
 from offroad_path.steering.collapse import COLLAPSE_CORRELATION, COLLAPSE_SPREAD
 
@@ -121,11 +121,11 @@ def _timing_sentence(timing: dict, pipeline: str = "") -> str:
         )
     # A scaled run's times come from tools/parallel_repro.py: each stage's start and end on the run's clock.
     finished = "from nothing" if timing.get("complete", True) else f"stopped before {', '.join(timing['unfinished'])} finished"
-    rows = [f"| {stage} | {start:.0f} | {end - start:.1f} |" for stage, (start, end) in timing.get("spans", {}).items()]
+    rows = [[stage, f"{start:.0f}", f"{end - start:.1f}"] for stage, (start, end) in timing.get("spans", {}).items()]
     return (
         f"Time: `dvc repro {pipeline}/dvc.yaml` {finished}, {minutes} min {seconds} s on {timing['machine']}, up to "
         f"{timing.get('jobs', 1)} stages at once (`{pipeline}/metrics/pipeline_time.json`, written by `tools/parallel_repro.py`):\n\n"
-        + "\n".join(["| stage | started (s) | seconds |", "| --- | --- | --- |", *rows])
+        + grid(["stage", "started (s)", "seconds"], rows)
         + "\n"
     )
 
