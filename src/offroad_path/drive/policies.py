@@ -178,7 +178,10 @@ class PilotNetPolicy(Policy):
 
     def __post_init__(self) -> None:
         self._prepare = steering_transforms(jitter=0.0, seed=0)
-        self.network = self.task
+
+    @property
+    def network(self) -> torch.nn.Module:
+        return self.task
 
     def look(self, frames: list[Frame]) -> list[float]:
         # The resize and normalisation of training (steering.angle_dataset), without the jitter.
@@ -212,7 +215,10 @@ class PathPolicy(Policy):
     def __post_init__(self) -> None:
         if self.temporal_alpha is not None:
             self._filter = TemporalFilter(self.temporal_alpha)
-        self.network = self.model
+
+    @property
+    def network(self) -> PathModel:
+        return self.model
 
     def fresh(self) -> PathPolicy:
         return replace(self, _filter=None, _previous_pose=None)  # __post_init__ gives it its own filter

@@ -95,20 +95,24 @@ def results_markdown(  # noqa: PLR0913
     return "\n".join(out).rstrip("\n") + "\n"
 
 
+HEADLINE = (
+    "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
+    "the stress sets, each scored on its own.\n"
+)
+
+
 def _provenance(full: bool, pipeline: str) -> str:
     if not pipeline:
         return (
             "The committed run: `dvc repro` of the embedded default on a 2-core CPU (`dvc.lock`, `metrics/`; "
             + ("the evaluate stage's own report is `data/evaluation/results.md`" if full else "every other table: `docs/results.md`")
             + "). Generated from `metrics/` (`python -m offroad_path.report.readme`; a test fails when it disagrees with them). "
-            "Every headline figure is the main test set's: held-out worlds drawn as the training drives are; the hard cases are "
-            "the stress sets, each scored on its own.\n"
+            + HEADLINE
         )
     return (
         f"The `experiment={pipeline}` run: `dvc repro {pipeline}/dvc.yaml` (`{pipeline}/dvc.lock`, `{pipeline}/metrics/`; the "
         f"evaluate stage's own report is `{pipeline}/data/evaluation/results.md`). Generated from `{pipeline}/metrics/` (`python -m "
-        f"offroad_path.report.readme --pipeline {pipeline}`). Every headline figure is the main test set's: held-out worlds drawn "
-        "as the training drives are; the hard cases are the stress sets, each scored on its own.\n"
+        f"offroad_path.report.readme --pipeline {pipeline}`). " + HEADLINE
     )
 
 
