@@ -38,14 +38,15 @@ def test_two_blocks_by_hand():
     percentile = score_draws(sums, iou, Resampling(1000, seed=0))
     assert Draws(percentile.estimate, percentile.values, percentile.resampling).interval() == Interval(0.75, 0.6, 0.9)
     # two worlds: each side stretched by Student's t with 1 degree of freedom over the normal quantile,
-    # 12.706 / 1.960 at 95 %
+    # 12.706 / 1.960 at 95 %, and by the bootstrap's small-sample bias, sqrt(2 / 1)
     widened = interval(sums, iou, Resampling(1000, seed=0))
-    assert widened.estimate == 0.75 and widened.low == pytest.approx(0.75 - 0.15 * 12.7062 / 1.95996, abs=1e-4)
-    assert widened.high == pytest.approx(0.75 + 0.15 * 12.7062 / 1.95996, abs=1e-4)
+    stretch = 12.7062 / 1.95996 * 2**0.5
+    assert widened.estimate == 0.75 and widened.low == pytest.approx(0.75 - 0.15 * stretch, abs=1e-4)
+    assert widened.high == pytest.approx(0.75 + 0.15 * stretch, abs=1e-4)
 
 
 def test_the_small_sample_widening_and_the_p_value_agree():
-    assert small_sample_factor(7, 0.95) == pytest.approx(2.4469 / 1.95996, abs=1e-4)
+    assert small_sample_factor(7, 0.95) == pytest.approx(2.4469 / 1.95996 * (7 / 6) ** 0.5, abs=1e-4)
     assert small_sample_factor(1, 0.95) == 1.0 and small_sample_factor(10_000, 0.95) == pytest.approx(1.0, abs=1e-3)
     values = np.random.default_rng(4).normal(0.02, 0.01, 4000)
     found = Draws(0.02, values, Resampling(4000), worlds=7)

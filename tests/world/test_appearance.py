@@ -208,14 +208,15 @@ def test_weights_that_can_draw_only_held_out_looks_are_refused_naming_both_keys(
 def test_no_training_drive_or_main_test_world_of_the_default_or_a_preset_shows_a_held_out_look():
     from offroad_path.config import load_config
     from offroad_path.world.appearance import draw_appearance
-    from offroad_path.world.held_out import held_out_seed
+    from offroad_path.world.held_out import DEVELOPMENT_STREAM, RETIRED_STREAM, held_out_seed
     from offroad_path.world.record import sequence_seed
 
     for preset in ([], ["experiment=gpu"], ["experiment=full"]):
         cfg = load_config(*preset)
         a, sequences = cfg.world.appearance, cfg.synthesize.sequences
         seeds = [sequence_seed(cfg.synthesize.seed, i) for i in range(sequences)]
-        seeds += [held_out_seed(cfg.synthesize.seed, i, s) for i in range(40) for s in ("main", "development")]
+        streams = (cfg.synthesize.test_worlds.main_stream, DEVELOPMENT_STREAM, RETIRED_STREAM)
+        seeds += [held_out_seed(cfg.synthesize.seed, i, s) for i in range(40) for s in streams]
         for seed in seeds:
             look = draw_appearance(seed, list(a.held_out), "training", a.weights)
             assert not look.held_out and not any(all(getattr(look, k) == v for k, v in c.items()) for c in a.held_out), (preset, seed)

@@ -10,7 +10,7 @@ import pytest
 from offroad_path.looks import axis_values
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
-from offroad_path.world.held_out import MIN_FRAMES, choose_held_out_worlds, held_out_seed, stress_seed, survey
+from offroad_path.world.held_out import DEVELOPMENT_STREAM, MIN_FRAMES, RETIRED_STREAM, choose_held_out_worlds, held_out_seed, stress_seed, survey
 from offroad_path.world.record import sequence_seed
 from offroad_path.world.scene import build_world
 
@@ -18,18 +18,18 @@ from offroad_path.world.scene import build_world
 def test_test_world_seeds_are_never_training_or_development_seeds():
     training = {sequence_seed(0, i) for i in range(1000)}
     tests = {held_out_seed(0, i) for i in range(1000)}
-    development = {held_out_seed(0, i, "development") for i in range(1000)}
+    development = {held_out_seed(0, i, DEVELOPMENT_STREAM) for i in range(1000)}
     stress = {stress_seed(0, name, i) for name in ("dappled", "off_track") for i in range(1000)}
     assert not training & tests and not (training | tests) & stress and len(stress) == 2000
     assert not development & (training | tests | stress) and len(development) == 1000
     # the development set is the stream the earlier runs' main test set was drawn from (spawn key 1)
-    assert held_out_seed(0, 5, "development") == int(np.random.SeedSequence([0, 5], spawn_key=(1,)).generate_state(1)[0])
+    assert held_out_seed(0, 5, DEVELOPMENT_STREAM) == int(np.random.SeedSequence([0, 5], spawn_key=(1,)).generate_state(1)[0])
 
 
 @pytest.mark.slow(seconds=7)
 def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config):
     cfg = compose_config("synthesize.test_worlds.block_m=20", "synthesize.test_worlds.horizon_m=20")
-    c, seed = cfg.synthesize.test_worlds, held_out_seed(0, 0)
+    c, seed = cfg.synthesize.test_worlds, held_out_seed(0, 0, 5)
     blocks, groups = survey(cfg.world, seed, c)
     world = build_world(cfg.world, seed)
     s = world.frame_s - world.frame_s[0]
@@ -52,17 +52,20 @@ def test_survey_counts_blocks_and_groups_over_the_labelled_frames(compose_config
 def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case(compose_config):
     c = compose_config(
         "synthesize.test_worlds.min_blocks=3", "synthesize.test_worlds.per_stress=1", "synthesize.test_worlds.development_blocks=2",
-        "synthesize.test_worlds.stress_sets=[held_out_look,outside_look]",
+        "synthesize.test_worlds.retired_blocks=2", "synthesize.test_worlds.stress_sets=[held_out_look,outside_look]",
     ).synthesize.test_worlds  # fmt: skip
     cfg = compose_config().world
     chosen = choose_held_out_worlds(cfg, c, master_seed=0, workers=2)
     main = [w for w in chosen if w.test_set == "main"]
     # the main set: the first candidates in seed order, until the blocks are there, whatever they show
     assert [w.index for w in main] == list(range(len(main))) and sum(w.blocks for w in main[:-1]) < 3 <= sum(w.blocks for w in main)
-    assert all(w.seed == held_out_seed(0, w.index) and w.draw == "training" and w.name == f"test_{w.index:03d}" for w in main)
-    development = [w for w in chosen if w.test_set == "development"]
+    assert all(w.seed == held_out_seed(0, w.index, c.main_stream) and w.draw == "training" and w.name == f"test_{w.index:03d}" for w in main)
+    retired = [w for w in chosen if w.retired]  # the retired main test set's worlds develop now, named apart
+    assert retired and all(w.test_set == "development" and w.name == f"retired_{w.index:03d}" for w in retired)
+    assert all(w.seed == held_out_seed(0, w.index, RETIRED_STREAM) for w in retired) and sum(w.blocks for w in retired) >= 2
+    development = [w for w in chosen if w.test_set == "development" and not w.retired]
     assert [w.index for w in development] == list(range(len(development))) and sum(w.blocks for w in development) >= 2
-    assert all(w.seed == held_out_seed(0, w.index, "development") and w.name == f"dev_{w.index:03d}" for w in development)
+    assert all(w.seed == held_out_seed(0, w.index, DEVELOPMENT_STREAM) and w.name == f"dev_{w.index:03d}" for w in development)
     assert not {w.seed for w in development} & {w.seed for w in main}
     stress = {w.test_set: w for w in chosen if w.test_set not in ("main", "development")}
     assert list(stress) == ["held_out_look", "outside_look"]
@@ -80,6 +83,7 @@ def test_a_stress_set_the_weights_cannot_hold_is_left_out(compose_config, caplog
     c = compose_config(
         "synthesize.test_worlds.min_blocks=1",
         "synthesize.test_worlds.development_blocks=0",
+        "synthesize.test_worlds.retired_blocks=0",
         "synthesize.test_worlds.stress_sets=[outside_look]",
     ).synthesize.test_worlds
     every = compose_config(

@@ -46,6 +46,8 @@ class PrimaryConfig:
     # the smallest difference that matters, in the estimate's units: an interval within it of no
     # difference reads "no material difference" (statistics.primaries); None: none declared
     smallest_effect: float | None = None
+    # the effect the design is sized to detect with `power` at Holm's strictest level (docs/conclusions.md)
+    planning_effect: float | None = None
 
 
 @dataclass
@@ -55,6 +57,15 @@ class ConclusionsConfig:
     alpha: float = setting(between(0, 1, low_open=True, high_open=True))  # family-wise, two-sided
     power: float = setting(between(0, 1, low_open=True, high_open=True))  # the drive's target power per primary
     primaries: dict[str, PrimaryConfig] = MISSING
+    left_out: dict[str, str] = field(default_factory=dict)  # a question the design cannot power: why
+
+
+@dataclass
+class MainTestSetConfig:
+    """The main test set the design was sized for (synthesize.test_worlds reads both)."""
+
+    stream: int = setting(at_least(5))  # its spawn key (offroad_path.world.held_out)
+    min_blocks: int = setting(at_least(0))
 
 
 @dataclass
@@ -62,6 +73,7 @@ class EvaluateConfig:
     architectures: list[str] = setting(each(one_of(_model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
     seeds: list[int] = setting(distinct(at_least(0), nonempty=True))  # training seeds of every run: data/runs/<run>/seed<k>
+    main_test_set: MainTestSetConfig = field(default_factory=MainTestSetConfig)
     drive_seeds: list[int] = setting(distinct(at_least(0)))  # the closed loop's (drive.seeds; the slip and curvature PilotNets')
     runs: list[str] = MISSING  # <architecture>-<pretraining>; conf/ takes the grid of the two lists
     runs_dir: str = MISSING  # <run>/predictions from train

@@ -140,7 +140,11 @@ class WorldConfig:
 @dataclass
 class TestWorldsConfig:
     min_blocks: int = setting(at_least(0))  # the main test set's blocks; 0: no test worlds (the split takes test blocks from the drives)
+    # The main test set's spawn key: 1-4 are the development set's, the appearance's, the stress sets' and
+    # the retired main test set's (offroad_path.world.held_out), so a fresh test set takes 5 or above.
+    main_stream: int = setting(at_least(5))
     development_blocks: int = setting(at_least(0))  # the development set's blocks (settings are chosen there); 0: none
+    retired_blocks: int = setting(at_least(0))  # the retired main test set's, in the development set; 0: none
     # Stress sets (offroad_path.world.held_out): condition groups (offroad_path.world.groups.GROUPS), each reported on its own.
     stress_sets: list[str] = setting(distinct(one_of(GROUP_KEYS)))
     per_stress: int = setting(at_least(0))  # worlds per stress set

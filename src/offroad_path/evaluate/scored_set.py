@@ -16,6 +16,7 @@ from omegaconf import DictConfig
 
 from offroad_path.data.loading import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
+from offroad_path.evaluate.design import design_record
 from offroad_path.errors import InputError
 from offroad_path.evaluate.figures import save_png
 from offroad_path.evaluate.pixel_scores import counts, mean_path, precision_recall_curve
@@ -199,5 +200,5 @@ def write_report(e: DictConfig, test: TestSet, sections: list[Section], table: l
         for run, curve in test.curves.items():
             lines = ["threshold,precision,recall"] + [f"{t:.4f},{p:.6f},{r:.6f}" for t, p, r in zip(*curve.values(), strict=True)]
             (tmp / f"{run}.csv").write_text("\n".join(lines) + "\n")
-        metrics = ({"notice": e.notice} if e.notice else {}) | report_metrics(sections)
+        metrics = ({"notice": e.notice} if e.notice else {}) | {"design": design_record(e)} | report_metrics(sections)
         write_text_atomic(e.metrics_path, json.dumps(metrics, indent=2) + "\n", "evaluate")

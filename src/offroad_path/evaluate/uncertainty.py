@@ -21,10 +21,11 @@ from offroad_path.data.splitting import block_of
 from offroad_path.errors import InputError
 from offroad_path.evaluate.pixel_scores import pooled
 from offroad_path.evaluate.scored_set import TestSet
-from offroad_path.report.rendering import comparisons_markdown
+from offroad_path.report.rendering import comparisons_markdown, seed_check_text
 from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR, PP_KEY, grid, method_title, split_run_name, title
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.statistics.scores import SCORES, Score, iou
+from offroad_path.statistics.seed_check import FAILED_BELOW_MEDIAN, failed_seeds
 
 
 def sample_blocks(samples: list[Sample], labels_dir: Path, block_m: float) -> list[tuple[str, int]]:
@@ -122,6 +123,7 @@ class Uncertainty:
         self.intervals: dict[tuple[str, str], Interval] = {}
         self.others: dict[tuple[str, str], dict[str, Interval]] = {}  # precision, recall, accuracy
         self.over_seeds: dict[tuple[str, str], tuple[float, float]] = {}  # (mean, sample sd) of the seeds' IoU, with several
+        self.failed: dict[str, list[int]] = {}  # network (raw maps) -> its seeds far below its others (seed_check)
         self.differences: dict[str, Interval] = {}  # metrics key -> a - b
         self.draws: dict[str, Draws] = {}  # metrics key -> the difference's resamples (for the primaries)
 
@@ -133,6 +135,8 @@ class Uncertainty:
             for key, per_seed in test.seed_counts.items():
                 ious = [pooled(c).iou for c in per_seed]
                 self.over_seeds[key] = (float(np.mean(ious)), float(np.std(ious, ddof=1)))
+                if key[1] == "no" and (failed := failed_seeds(dict(zip(test.seeds, ious, strict=True)))):
+                    self.failed[key[0]] = failed
         b = self.bootstrap
         per_seed = {key: np.stack(seeds) for key, seeds in test.seed_counts.items()}  # (S, N, 4)
         self.intervals = {key: b.interval(counts, iou) for key, counts in per_seed.items()}
@@ -169,6 +173,8 @@ class Uncertainty:
             "Each IoU's interval, and with several training seeds the mean and standard deviation of the seeds' own IoU, are "
             "in the results table above; here the other scores' intervals (raw maps) and the comparisons.\n",
         ]
+        if len(self.seeds) > 1:
+            lines.append(seed_check_text(self.failed, FAILED_BELOW_MEDIAN) + "\n")
         header = ["method (raw)", *(f"{title(name)} [95 % interval]" for name in others)]
         rows = [[method_title(run), *(self.others[run, "no"][name].text() for name in others)] for run in runs]
         return "\n".join([*lines, grid(header, rows)]) + "\n\n" + comparisons_markdown(self.metrics()["uncertainty"])
@@ -184,4 +190,5 @@ class Uncertainty:
             intervals[f"{run}.{PP_KEY[pp]}"] |= {"seed_mean": round(mean, 6), "seed_sd": round(sd, 6)}
         differences = {key: entry(i, "iou_difference") for key, i in self.differences.items()}
         test_set = {"worlds": self.bootstrap.worlds, "blocks": self.blocks, "seeds": len(self.seeds)}
-        return {"uncertainty": {"test_set": test_set, **intervals, **differences}}
+        checked = {"failed_seeds": self.failed} if len(self.seeds) > 1 else {}
+        return {"uncertainty": {"test_set": test_set, **checked, **intervals, **differences}}

@@ -97,6 +97,15 @@ def comparisons_markdown(u: dict, skip: tuple[str, ...] = ()) -> str:
     return grid(["comparison (IoU, a - b)", "difference [95 % interval]"], rows) + "\n" if found else ""
 
 
+def seed_check_text(failed: dict[str, list[int]], margin: float) -> str:
+    """The seed check's sentence (evaluate.seed_check; `failed`: network -> its failed seeds, raw maps)."""
+    rule = f"more than {margin:g} IoU below the median of its network's seeds"
+    if not failed:
+        return f"Seed check: no seed of any network lies {rule}."
+    named = "; ".join(f"{method_title(run)}: seed {', '.join(map(str, seeds))}" for run, seeds in failed.items())
+    return f"**Seed check: failed trainings** (a seed {rule}, raw maps): {named}."
+
+
 def against_pilotnet_markdown(s: dict) -> str:
     """Each path network through pure pursuit against PilotNet (evaluate's `steering_from_paths` metrics):
     its MAE and the paired difference, both pooled over the seeds."""
@@ -121,13 +130,18 @@ def primaries_markdown(conclusions, measured: dict[str, dict]) -> str:
         return ""
     found = verdicts(conclusions.primaries, measured, conclusions.alpha)
     lines = [
-        f"Primary questions, declared in `conf/evaluate/default.yaml` before the run: {len(found)} in one family, Holm's "
+        f"Primary questions, pre-registered in the design (`conf/evaluate/design/`) before its main test set was first scored: "
+        f"{len(found)} in one family, Holm's "
         f"correction at family-wise {conclusions.alpha:g} (evaluate's by the hierarchical bootstrap's p-value, the drive's "
         "by the exact test of their interventions); each interval is at the level Holm's step gives it, and a verdict states a "
-        "direction only when Holm rejects no difference and the interval reaches beyond the primary's smallest effect of interest "
-        "(`smallest_effect`); an interval within it reads no material difference. Every other comparison below is exploratory.\n",
+        "direction only when Holm rejects no difference and the interval does not lie wholly within the primary's smallest effect "
+        "of interest (`smallest_effect`); an interval within it reads no material difference. Every other comparison below is "
+        "exploratory.\n",
         grid(PRIMARIES_HEADER, [_primary_row(v, measured.get(v.name, {})) for v in found]),
     ]
+    if left_out := conclusions.get("left_out"):
+        lines.append("\nLeft out of the family, as the design cannot power them (exploratory here): "
+                     + "; ".join(f"{name}: {why}" for name, why in left_out.items()) + ".\n")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

@@ -17,11 +17,13 @@ from offroad_path.report.rendering import (
     fmt,
     primaries_markdown,
     results_table_markdown,
+    seed_check_text,
     stress_markdown,
     temporal_markdown,
 )
 from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR, grid
 from offroad_path.statistics.counts import power_sentence
+from offroad_path.statistics.seed_check import FAILED_BELOW_MEDIAN
 from offroad_path.steering.collapse import COLLAPSE_CORRELATION, COLLAPSE_SPREAD
 
 
@@ -66,13 +68,15 @@ def results_markdown(  # noqa: PLR0913
         f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % hierarchical bootstrap ({resamples} "
         f"resamples): the {worlds} test worlds drawn with replacement, then the blocks within each drawn world, then the "
         "training seeds, every compared method on the same draw, each method's counts pooled over its seeds; each interval "
-        f"widened by Student's t for {worlds} worlds (docs/conclusions.md). They cover which test worlds and stretches of "
+        f"widened by Student's t and the bootstrap's small-sample bias for {worlds} worlds (docs/conclusions.md). They cover "
+        "which test worlds and stretches of "
         "driving were tested; which seeds trained the networks only in part, since a few seeds show little of the seed-to-seed "
         "spread, and a rerun on another kind of CPU trains other bytes: a primary's smallest effect of interest lies above "
         "how far a rerun moved it.\n",
     ]
     out += [
         results_table_markdown(evaluation, heading=""),
+        *([seed_check_text(u["failed_seeds"], FAILED_BELOW_MEDIAN) + "\n"] if "failed_seeds" in u else []),
         primaries_markdown(conclusions, evaluation.get("primaries", {}) | (drive or {}).get("primaries", {})),
     ]
     if "mean_path_prior" in evaluation.get("baselines", {}):

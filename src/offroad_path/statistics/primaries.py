@@ -15,8 +15,10 @@ shown interval excludes the null exactly when Holm rejects it (up to the bootstr
 A primary may declare its smallest effect of interest (`smallest_effect`, in its estimate's units):
 when its interval at the Holm level lies within that distance of the null, the verdict is "no
 material difference" (an equivalence test: two one-sided tests at the same level), whether or not
-Holm rejects the null, so that an effect smaller than what a rerun on another CPU or with other
-seeds moves is never stated as a direction.
+Holm rejects the null. One rule for a direction, here and in docs/conclusions.md: Holm rejects the
+null and the interval does not lie wholly within the smallest effect (so [+0.001, +0.012] with a
+smallest effect of 0.01 reads "higher": above 0, by an amount the interval shows); otherwise "no
+material difference" or "no difference measured".
 """
 
 from __future__ import annotations

@@ -4,11 +4,14 @@ Three kinds, each from a seed stream of its own:
 
 - The development set, on which every setting is chosen (benchmarks/recipe_search.py,
   benchmarks/learning_curve.py): worlds drawn exactly as the main test set's, from the stream that
-  earlier runs scored their main test set on, until it holds `development_blocks` blocks. No
-  stage trains or scores on it; the split writes it to a manifest of its own.
+  the first runs scored their main test set on, until it holds `development_blocks` blocks; and
+  the retired main test set (`retired_blocks` blocks of the stream the next runs scored, named
+  retired_NNN), whose results were looked at before its rules were last changed. No stage trains
+  or scores on either; the split writes them to a manifest of their own.
 - The main test set, which the headline figures (Table 5.1, the baselines, the primaries) score:
-  worlds drawn exactly as the training drives are (world.appearance.weights), kept in seed order
-  until it holds `min_blocks` blocks of `block_m` labelled metres. It measures the claim on the
+  worlds drawn exactly as the training drives are (world.appearance.weights) from the stream
+  `main_stream` (the pre-registered design's, conf/evaluate/design/), kept in seed order until it
+  holds `min_blocks` blocks of `block_m` labelled metres. It measures the claim on the
   distribution the networks were trained for, with every condition at its natural frequency.
 - Stress sets, one per hard case of `stress_sets` (a condition group of
   offroad_path.world.groups.GROUPS): `per_stress` worlds each, drawn for the purpose and kept when
@@ -40,9 +43,12 @@ from offroad_path.world.scene import appearance_weights, build_world
 
 log = logging.getLogger(__name__)
 # Spawn keys: SeedSequence([master, i]) pads with zeros, so [master, 1, i] could repeat a drive's.
-DEVELOPMENT_STREAM = 1  # the development set's: the retired main test set's stream, which settings were tuned on
-MAIN_STREAM = 4  # the main test set's: drawn once the recipe was fixed; only the committed run is scored on it
+DEVELOPMENT_STREAM = 1  # the development set's: the first runs' main test set, which settings were tuned on
+RETIRED_STREAM = 4  # the main test set's until its rules changed after a look: development worlds since
 STRESS_STREAM = 3  # the spawn key of stress-world seeds (2 is the appearance's)
+# The main test set's stream is the design's (synthesize.test_worlds.main_stream): above every one of these.
+RESERVED_STREAMS = (DEVELOPMENT_STREAM, 2, STRESS_STREAM, RETIRED_STREAM)
+RETIRED = "retired"  # the retired main test set's worlds: in the development set, named apart
 MIN_FRAMES = 3  # labelled-range frames a world needs in a group to count as showing it
 # How a stress set's worlds draw their look (offroad_path.world.appearance.DRAWS); every other set: "training".
 STRESS_DRAWS = {"held_out_look": "held_out", "outside_look": "full_variety"}
@@ -54,11 +60,14 @@ class HeldOutWorld:
     seed: int
     blocks: int  # blocks of labelled driving
     groups: tuple[str, ...]  # condition groups it shows
-    test_set: str = MAIN  # main, or the stress set it was drawn for
+    test_set: str = MAIN  # main, development, or the stress set it was drawn for
+    retired: bool = False  # a development world of the retired main test set
 
     @property
     def name(self) -> str:
-        if self.test_set in STREAMS:
+        if self.retired:
+            return f"{PREFIXES[RETIRED]}_{self.index:03d}"
+        if self.test_set in PREFIXES:
             return f"{PREFIXES[self.test_set]}_{self.index:03d}"
         return f"stress_{self.test_set}_{self.index:03d}"
 
@@ -67,13 +76,12 @@ class HeldOutWorld:
         return STRESS_DRAWS.get(self.test_set, "training")
 
 
-STREAMS = {DEVELOPMENT: DEVELOPMENT_STREAM, MAIN: MAIN_STREAM}  # the sets drawn as the training drives are
-PREFIXES = {DEVELOPMENT: "dev", MAIN: "test"}
+PREFIXES = {DEVELOPMENT: "dev", RETIRED: "retired", MAIN: "test"}  # the sets drawn as the training drives are
 
 
-def held_out_seed(master_seed: int, index: int, test_set: str = MAIN) -> int:
-    """World `index` of the main test set or the development set, each a stream of its own."""
-    return int(np.random.SeedSequence([master_seed, index], spawn_key=(STREAMS[test_set],)).generate_state(1)[0])
+def held_out_seed(master_seed: int, index: int, stream: int) -> int:
+    """World `index` of a set drawn as the training drives are (main, development, retired): a stream each."""
+    return int(np.random.SeedSequence([master_seed, index], spawn_key=(stream,)).generate_state(1)[0])
 
 
 def stress_seed(master_seed: int, stress_set: str, index: int) -> int:
@@ -94,9 +102,9 @@ def survey(cfg: WorldConfig, seed: int, c: TestWorldsConfig, draw: str = "traini
     return blocks, shown
 
 
-def _survey_job(args: tuple[WorldConfig, int, int, TestWorldsConfig, str]) -> HeldOutWorld:
-    cfg, index, seed, c, test_set = args
-    return HeldOutWorld(index, seed, *survey(cfg, seed, c, STRESS_DRAWS.get(test_set, "training")), test_set=test_set)
+def _survey_job(args: tuple[WorldConfig, int, int, TestWorldsConfig, str, bool]) -> HeldOutWorld:
+    cfg, index, seed, c, test_set, retired = args
+    return HeldOutWorld(index, seed, *survey(cfg, seed, c, STRESS_DRAWS.get(test_set, "training")), test_set=test_set, retired=retired)
 
 
 @dataclass
@@ -106,19 +114,25 @@ class _Search:
     test_set: str
     wanted: int  # blocks (a set drawn as the training drives are) or worlds (a stress set)
     key: str  # the setting that asks for them, named when the candidates run out
+    stream: int = 0  # a set drawn as the training drives are: its spawn key; 0: a stress set
+    retired: bool = False
     next_index: int = 0
     kept: list[HeldOutWorld] = field(default_factory=list)
 
     @property
     def stress(self) -> bool:
-        return self.test_set not in STREAMS
+        return not self.stream
+
+    @property
+    def label(self) -> str:
+        return RETIRED if self.retired else self.test_set
 
     @property
     def done(self) -> bool:
         return (len(self.kept) if self.stress else sum(w.blocks for w in self.kept)) >= self.wanted
 
     def seed(self, master_seed: int, index: int) -> int:
-        return stress_seed(master_seed, self.test_set, index) if self.stress else held_out_seed(master_seed, index, self.test_set)
+        return stress_seed(master_seed, self.test_set, index) if self.stress else held_out_seed(master_seed, index, self.stream)
 
     def take(self, world: HeldOutWorld) -> None:
         """The next candidate in seed order: kept while the set is not made (a stress set's, if it shows the case)."""
@@ -136,7 +150,11 @@ def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: i
     depend on the cores (surplus candidates of a round are surveyed and dropped)."""
     if c.min_blocks == 0:
         return []
-    searches = [_Search(DEVELOPMENT, c.development_blocks, "development_blocks"), _Search(MAIN, c.min_blocks, "min_blocks")]
+    searches = [
+        _Search(DEVELOPMENT, c.development_blocks, "development_blocks", DEVELOPMENT_STREAM),
+        _Search(DEVELOPMENT, c.retired_blocks, "retired_blocks", RETIRED_STREAM, retired=True),
+        _Search(MAIN, c.min_blocks, "min_blocks", c.main_stream),
+    ]
     for stress_set in c.stress_sets:
         if stress_set in STRESS_DRAWS and not _draws_differ(cfg, stress_set):
             log.warning("stress set %s: the training distribution already draws every such look; left out", stress_set)
@@ -148,14 +166,14 @@ def choose_held_out_worlds(cfg: WorldConfig, c: TestWorldsConfig, master_seed: i
         jobs = []
         for search in open_searches:
             indices = range(search.next_index, min(search.next_index + per_search, c.max_candidates))
-            jobs += [(cfg, i, search.seed(master_seed, i), c, search.test_set) for i in indices]
+            jobs += [(cfg, i, search.seed(master_seed, i), c, search.test_set, search.retired) for i in indices]
             search.next_index = indices.stop
-        by_set = {s.test_set: s for s in open_searches}
+        by_set = {s.label: s for s in open_searches}
         for world in map_processes(_survey_job, jobs, workers, [f"{job[4]} test world {job[1]}" for job in jobs]):
-            by_set[world.test_set].take(world)
+            by_set[RETIRED if world.retired else world.test_set].take(world)
         _check_shortfall(searches, c.max_candidates)
     for search in searches:
-        name = f"stress set {search.test_set}" if search.stress else f"{search.test_set} set"
+        name = f"stress set {search.test_set}" if search.stress else f"{search.label} set"
         log.info("%s: %d worlds, %d blocks", name, len(search.kept), sum(w.blocks for w in search.kept))
     return [world for search in searches for world in search.kept]
 
