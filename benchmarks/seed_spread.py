@@ -3,14 +3,19 @@ change is admissible under the rule for changes that alter results: each network
 scratch once per seed, scored the evaluate stage's way; PilotNet by its mean absolute error.
 
     python benchmarks/seed_spread.py [--seeds 0 1 2 3 4] [--models segnet fcn unet pilotnet] [--json OUT]
-        [--labels-from CHECKOUT] [--runs-dir data/runs] [--steering-dir data/steering] [-- overrides]
+        [--pretraining none] [--labels-from CHECKOUT] [--test-set main] [--runs-dir data/runs]
+        [--steering-dir data/steering] [-- overrides]
     python benchmarks/seed_spread.py --merge OUT IN [IN ...]
     python benchmarks/seed_spread.py --compare REFERENCE.json CANDIDATE.json [--margin 0.02] [--mae-margin 0.01]
 
 Needs the split of a finished `dvc repro` (data/split, data/labels) in the working directory. Each
-run is `python -m offroad_path.train pretraining=none seed=S` (MLflow off) into a temporary
-folder, with any overrides after `--`; its test confidence maps are scored against the test labels
-with the evaluate stage's pooled IoU at 0.5. Prints one row per run (IoU, epochs trained, seconds)
+run is `python -m offroad_path.train pretraining=none seed=S` (MLflow off; `--pretraining
+segmentation` needs the pretrain stage's data/pretrain) into a temporary folder, with any overrides
+after `--`; its confidence maps are scored against the labels with the evaluate stage's pooled IoU
+at 0.5. Scored on the **development set** (data/split/development.csv: the training reads a copy
+of the split whose test.csv is it), since settings are chosen there and the main test set scores
+the committed run alone; `--test-set main` scores the main test set instead (an audit only).
+Prints one row per run (IoU, epochs trained, seconds)
 and, per network, the mean, the sample standard deviation and the range over the seeds. `--json`
 also writes each run's per-image counts and the mean-path prior's. `--labels-from CHECKOUT` scores
 against another checkout's test labels instead (its data/split/test.csv; frames matched by
@@ -51,18 +56,31 @@ from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import read_manifest
 from offroad_path.evaluate.pixel_scores import counts, mean_path
 
+SPLIT = Path("data/split")
 
-def yardstick_labels(root: Path | None) -> dict[str, str] | None:
-    """Test label files of another checkout's split (root/data/split/test.csv) by frame key, or None: each run's own."""
+
+SCORED = {"development": "development.csv", "main": "test.csv"}  # --test-set: the manifest the runs are scored on
+
+
+def scored_split(test_set: str, folder: Path) -> Path:
+    """A split folder whose test.csv is the `test_set`'s manifest of data/split (train.csv and val.csv as they are)."""
+    for name in ("train.csv", "val.csv"):
+        (folder / name).write_bytes((SPLIT / name).read_bytes())
+    (folder / "test.csv").write_bytes((SPLIT / SCORED[test_set]).read_bytes())
+    return folder
+
+
+def yardstick_labels(root: Path | None, test_set: str) -> dict[str, str] | None:
+    """Label files of another checkout's split (root/data/split/<the scored manifest>) by frame key, or None: each run's own."""
     if root is None:
         return None
-    return {key(s): str(root / s.label) for s in read_manifest(root / "data" / "split" / "test.csv")}
+    return {key(s): str(root / s.label) for s in read_manifest(root / "data" / "split" / SCORED[test_set])}
 
 
-def prior_counts(yardstick: dict[str, str] | None, threshold: float = 0.5) -> dict[str, list[int]]:
-    """The mean-path prior (this checkout's average training label) painted on every test frame, scored as the runs are."""
-    prior = mean_path(load_labels(read_manifest(Path("data/split/train.csv")))) > threshold
-    test = read_manifest(Path("data/split/test.csv"))
+def prior_counts(yardstick: dict[str, str] | None, test_set: str, threshold: float = 0.5) -> dict[str, list[int]]:
+    """The mean-path prior (this checkout's average training label) painted on every scored frame, scored as the runs are."""
+    prior = mean_path(load_labels(read_manifest(SPLIT / "train.csv"))) > threshold
+    test = read_manifest(SPLIT / SCORED[test_set])
     if yardstick is not None:
         test = [s for s in test if key(s) in yardstick]
         test = [replace(s, label=yardstick[key(s)]) for s in test]
@@ -83,18 +101,19 @@ def steering_errors(run_dir: Path) -> tuple[dict[str, float], dict[str, float]]:
     return errors, straight
 
 
-def train_command(model: str, seed: int, out: Path, overrides: list[str]) -> list[str]:
-    """The stage that trains `model` from scratch with `seed` into `out` (MLflow off, never resumed)."""
-    common = [f"seed={seed}", "resume=false", "mlflow.enabled=false", *overrides]
+def train_command(model: str, seed: int, out: Path, split: Path, args: argparse.Namespace) -> list[str]:
+    """The stage that trains `model` with `seed` into `out` on `split` (MLflow off, never resumed)."""
+    common = [f"seed={seed}", "resume=false", "mlflow.enabled=false", *args.overrides]
     if model == "pilotnet":
-        return [sys.executable, "-m", "offroad_path.train_steering", f"steering.out_dir={out}",
+        return [sys.executable, "-m", "offroad_path.train_steering", f"steering.out_dir={out}", f"steering.split_dir={split}",
                 f"steering.metrics_path={out}.json", f"steering.plots_path={out}.csv", *common]  # fmt: skip
-    return [sys.executable, "-m", "offroad_path.train", f"model={model}", "pretraining=none", f"train.out_dir={out}", *common]
+    return [sys.executable, "-m", "offroad_path.train", f"model={model}", f"pretraining={args.pretraining}",
+            f"train.out_dir={out}", f"data.split_dir={split}", *common]  # fmt: skip
 
 
 def pipeline_run(args: argparse.Namespace, model: str, seed: int) -> Path | None:
     """The pipeline's own run of `model` and `seed` (--runs-dir, --steering-dir), when given and finished."""
-    where = args.steering_dir if model == "pilotnet" else args.runs_dir and args.runs_dir / f"{model}-none"
+    where = args.steering_dir if model == "pilotnet" else args.runs_dir and args.runs_dir / f"{model}-{args.pretraining}"
     done = where / f"seed{seed}" if where else None
     return done if done is not None and (done / "metrics.json").is_file() else None
 
@@ -104,13 +123,15 @@ def train_seeds(args: argparse.Namespace, yardstick: dict[str, str] | None) -> d
     print("| network | seed | test IoU (PilotNet: MAE) | epochs | seconds |\n| --- | --- | --- | --- | --- |")
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "split").mkdir()
+        split = scored_split(args.test_set, Path(tmp) / "split")  # beside the runs' folders, never above them
         for model in args.models:
             for seed in args.seeds:
                 out, seconds = Path(tmp) / f"{model}-{seed}", 0.0
                 if done := pipeline_run(args, model, seed):  # made with the same config
                     out = done
                 else:
-                    command = train_command(model, seed, out, args.overrides)
+                    command = train_command(model, seed, out, split, args)
                     start = time.perf_counter()
                     run = subprocess.run(command, capture_output=True, text=True)
                     seconds = time.perf_counter() - start
@@ -137,7 +158,9 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--models", nargs="+", default=["segnet", "fcn", "unet"])
     parser.add_argument("--json", type=Path, help="write each run's per-image counts and the prior's here")
-    parser.add_argument("--labels-from", type=Path, metavar="CHECKOUT", help="score against this checkout's test labels")
+    parser.add_argument("--labels-from", type=Path, metavar="CHECKOUT", help="score against this checkout's labels")
+    parser.add_argument("--test-set", choices=list(SCORED), default="development", help="the frames scored (the rule's: development)")
+    parser.add_argument("--pretraining", choices=["none", "segmentation"], default="none", help="the path networks' pretraining")
     parser.add_argument(
         "--runs-dir", type=Path, help="score RUNS_DIR/<model>-none/seed<k> where it exists instead of training it (data/runs)"
     )
@@ -161,12 +184,13 @@ def main() -> None:
             return
     except ValueError as e:
         sys.exit(f"{'--compare' if args.compare else '--merge'}: {e}")
-    if (args.runs_dir or args.steering_dir) and args.overrides:
-        parser.error("--runs-dir scores runs made with the checkout's config: give no overrides with it")
+    if (args.runs_dir or args.steering_dir) and (args.overrides or args.test_set != "main"):
+        parser.error("--runs-dir scores the pipeline's runs (the checkout's config, scored on the main test set): "
+                     "give no overrides and --test-set main with it")  # fmt: skip
     print(f"overrides: {' '.join(args.overrides) or '(none: the laptop preset)'}")
-    yardstick = yardstick_labels(args.labels_from.resolve() if args.labels_from else None)
+    yardstick = yardstick_labels(args.labels_from.resolve() if args.labels_from else None, args.test_set)
     results = train_seeds(args, yardstick)
-    prior = prior_counts(yardstick)
+    prior = prior_counts(yardstick, args.test_set)
     print(f"\nmean-path prior: {iou(prior, list(prior)):.4f}\n")
     print("| network | mean IoU (PilotNet: MAE) | standard deviation | range |\n| --- | --- | --- | --- |")
     for model, row in results.items():
@@ -175,7 +199,9 @@ def main() -> None:
         print(f"| {model} | {statistics.mean(ious):.4f} | {spread:.4f} | {min(ious):.4f} to {max(ious):.4f} |")
     if args.json:
         labels = str(args.labels_from) if args.labels_from else "own test labels"
-        args.json.write_text(json.dumps({"overrides": args.overrides, "labels": labels, "prior": prior, "models": results}) + "\n")
+        found = {"overrides": args.overrides, "labels": labels, "test_set": args.test_set, "pretraining": args.pretraining,
+                 "prior": prior, "models": results}  # fmt: skip
+        args.json.write_text(json.dumps(found) + "\n")
 
 
 if __name__ == "__main__":

@@ -1,23 +1,28 @@
-"""The planning table of the main test set: each primary's expected half-width and power by design
-(main test worlds, training seeds), from variance components measured on development worlds, and
-each design's cost on 2 cores.
+"""The planning table of the main test set: variance components of each primary's paired difference
+measured on development worlds, and from them each design's expected half-width, power at Holm's
+strictest level and cost on 2 cores.
 
-    git show 985c4fc:metrics/evaluation.json > /tmp/retired.json   # the retired main test set's run
-    git show 985c4fc:metrics/pipeline_time.json > /tmp/retired_time.json
-    python benchmarks/test_set_design.py /tmp/retired.json /tmp/retired_time.json [--worlds 7 10 12 ...]
+    python benchmarks/seed_spread.py --seeds 0 1 2 3 4 --models segnet fcn unet --json /tmp/none.json
+    python benchmarks/seed_spread.py --seeds 0 1 2 3 4 --models unet --pretraining segmentation --json /tmp/seg.json
+    git show REV:metrics/evaluation.json > /tmp/retired.json      # the last run scored on the retired main
+    git show REV:metrics/pipeline_time.json > /tmp/retired_time.json   # test set (REV: CHANGELOG.md names it)
+    python benchmarks/test_set_design.py /tmp/none.json /tmp/seg.json --retired /tmp/retired.json \
+        --times /tmp/retired_time.json [--family 3] [--worlds 7 12 20] [--seeds 2 5 10]
 
-The components come from a run scored on worlds that now develop (the retired main test set, W0
-worlds, S0 seeds): a paired difference's variance is sigma_w^2 / W + sigma_s^2 / S. sigma_s^2 per
-seed: twice the pooled seed variance of the networks (two independently trained networks; a
-network whose seeds differ by more than FLAG is left out of the pool, as a failed training), once
-for a network against the prior, 0 for post-processing (the same network's maps; its whole spread
-is counted as the worlds'). sigma_w^2: what the committed interval leaves, W0 (SE0^2 -
-sigma_s^2 / S0), SE0 its half-width over z and the widening it was drawn with. The open loop's
-seed component is not in the metrics: its whole spread is counted as the worlds'.
+Components (method of moments, Searle et al. 1992, ch. 4), from seed_spread's per-image counts on
+the development worlds (--seeds runs of each network, trained as the pipeline trains them): each
+world's pooled IoU difference per seed, d[w, s] (a network against the mean-path prior: the prior
+has no seeds). sigma_ws^2: the world x seed interaction (the two-way residual); sigma_s^2: the
+spread of the seeds' means over worlds less sigma_ws^2 / W; sigma_b^2: blocks within a world (the
+split's block_m, seeds averaged); sigma_w^2: the spread of the worlds' means less sigma_b^2 / B and
+sigma_ws^2 / S. Then an estimate over W worlds of B blocks and S seeds has the variance
+sigma_w^2 / W + sigma_b^2 / (W B) + sigma_s^2 / S + sigma_ws^2 / (W S). Post-processing and the
+open loop are not in those runs: their spread is the retired run's interval (--retired), counted
+wholly as the worlds'.
 
-Power at Holm's strictest level alpha / m (m: the family), two-sided, with the interval's
-small-sample widening at W worlds: Phi(effect / SE - z * widen(W)). Cost: the committed run's stage
-times split into a part per main test world, per seed and the rest (COST_MODEL says which stages).
+Power at Holm's strictest level alpha / family, two-sided, with the intervals' small-sample widening
+at W worlds: Phi(effect / SE - z * widen(W)). Cost: the retired run's stage times (--times) split
+into seconds per main test world, per seed and the rest.
 """
 
 from __future__ import annotations
@@ -25,56 +30,123 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import statistics
 from pathlib import Path
 
+import numpy as np
 from scipy.stats import norm, t
 
+from offroad_path.config import load_config
+from offroad_path.data.labels import read_label_run
 from offroad_path.statistics.bootstrap import small_sample_factor
+from offroad_path.statistics.scores import Scores
 
-FLAG = 0.05  # a seed this far below its network's median is a failed training (offroad_path.statistics.seed_check)
-LEVEL = 0.95
-# (primary, comparison in the uncertainty section or steering_from_paths, seed variance: how many networks' worth)
-PRIMARIES = [
-    ("central_claim", "uncertainty/every_scratch_run_vs_mean_path_prior", 1),
-    ("ranking", "uncertainty/fcn-none_vs_unet-none", 2),
-    ("pretraining", "uncertainty/unet-segmentation_vs_unet-none", 2),
-    ("postprocessing", "uncertainty/unet-none_postprocessed_vs_raw", 0),
-    ("open_loop", "steering_from_paths/unet-none_vs_pilotnet", 0),
-]
-# Which stage times scale with what: a stage's time is split evenly over the worlds or seeds it covers.
-PER_WORLD = ("drive",)  # every main test world, and nothing else
-SHARED_BY_WORLDS = ("synthesize", "label", "evaluate")  # every rendered world: training drives, development, main, stress
+BLOCKS_PER_WORLD = 4.5  # the main test set's mean (stream 5's first 20 worlds: 91 blocks)
+# primary -> (a, b) of the seed runs (b "prior": the mean-path prior); the central claim: its weakest member
+FROM_SEEDS = {
+    "central_claim": [("segnet-none", "prior"), ("fcn-none", "prior"), ("unet-none", "prior")],
+    "ranking": [("fcn-none", "unet-none")],
+    "pretraining": [("unet-segmentation", "unet-none")],
+}
+FROM_RETIRED = {"postprocessing": "uncertainty/unet-none_postprocessed_vs_raw", "open_loop": "steering_from_paths/unet-none_vs_pilotnet"}
+PLANNING_EFFECT = {"central_claim": 0.10}  # the others: --effect
+PER_WORLD = ("drive",)  # stage times spent per main test world
+SHARED_BY_WORLDS = ("synthesize", "label", "evaluate")  # spent per rendered world
 PER_SEED = ("train_", "postprocess@", "train_steering@")
 
 
-def seed_variance(uncertainty: dict) -> float:
-    """Pooled per-seed IoU variance of the path networks (raw), leaving out a failed training."""
-    sds = [v["seed_sd"] for k, v in uncertainty.items() if k.endswith(".raw") and "seed_sd" in v]
-    kept = [sd for sd in sds if sd * math.sqrt(2) / 2 <= FLAG]  # two seeds: each is sd / sqrt(2) from the median
-    return sum(sd**2 for sd in kept) / len(kept)
+def world_seed_ious(counts: list[dict[str, list[int]]], blocks: dict[str, tuple[str, int]]) -> dict:
+    """{(world, block): (S,) IoU} and {world: (S,) IoU} of per-seed per-image counts (frame key -> tp, fp, tn, fn)."""
+    by_block: dict[tuple[str, int], np.ndarray] = {}
+    by_world: dict[str, np.ndarray] = {}
+    for frame, where in blocks.items():
+        per_seed = np.array([c[frame] for c in counts], np.float64)
+        by_block[where] = by_block.get(where, 0) + per_seed
+        by_world[where[0]] = by_world.get(where[0], 0) + per_seed
+    return {"block": {k: np.array([Scores.of(c).iou for c in v]) for k, v in by_block.items()},
+            "world": {k: np.array([Scores.of(c).iou for c in v]) for k, v in by_world.items()}}  # fmt: skip
 
 
-def components(evaluation: dict) -> dict[str, tuple[float, float, float]]:
-    """primary -> (estimate, sigma_w^2, sigma_s^2) on the run's test set."""
-    test = evaluation["uncertainty"]["test_set"]
-    w0, s0 = test["worlds"], test["seeds"]
-    var_net = seed_variance(evaluation["uncertainty"])
-    widen0 = t.ppf(0.975, w0 - 1) / norm.ppf(0.975)  # the widening that run's intervals were drawn with
+def components(a: dict, b: dict) -> dict[str, float]:
+    """Variance components of the difference a - b (world_seed_ious of each; a side of one seed is broadcast)."""
+    worlds = sorted(a["world"])
+    d = np.stack([a["world"][w] - b["world"][w] for w in worlds])  # (W, S)
+    n_worlds, n_seeds = d.shape
+    residual = d - d.mean(1, keepdims=True) - d.mean(0, keepdims=True) + d.mean()
+    ws = float((residual**2).sum() / ((n_worlds - 1) * (n_seeds - 1)))
+    seed = max(float(d.mean(0).var(ddof=1)) - ws / n_worlds, 0.0)
+    per_block = {k: float(np.mean(a["block"][k] - b["block"][k])) for k in a["block"]}
+    within, sizes = [], []
+    for w in worlds:
+        values = [v for (world, _), v in per_block.items() if world == w]
+        if len(values) > 1:
+            within.append(statistics.variance(values))
+            sizes.append(len(values))
+    block = float(np.mean(within)) if within else 0.0
+    world = max(float(d.mean(1).var(ddof=1)) - block / float(np.mean(sizes)) - ws / n_seeds, 0.0)
+    return {
+        "estimate": float(d.mean()),
+        "world": world,
+        "block": block,
+        "seed": seed,
+        "world_x_seed": ws,
+        "worlds": n_worlds,
+        "seeds": n_seeds,
+    }
+
+
+def from_seed_runs(files: list[Path], block_m: float, labels_dir: Path) -> dict[str, dict[str, float]]:
+    if not files:
+        return {}
+    runs, prior = {}, None
+    for path in files:
+        found = json.loads(path.read_text())
+        if found.get("test_set") != "development":
+            raise SystemExit(f"{path}: not scored on the development set (seed_spread.py --test-set development)")
+        prior = found["prior"]
+        for model, row in found["models"].items():
+            runs[f"{model}-{found.get('pretraining', 'none')}"] = row["counts"]
+    distance = {run.name: run.distance() for run in read_label_run(labels_dir)}
+    blocks = {}
+    for frame in prior:
+        sequence, f0, _ = frame.split("/")
+        blocks[frame] = (sequence, int(distance[sequence][int(f0)] // block_m))
+    ious = {name: world_seed_ious(counts, blocks) for name, counts in runs.items()}
+    ious["prior"] = world_seed_ious([prior], blocks)
     out = {}
-    for name, compare, networks in PRIMARIES:
-        section, key = compare.split("/")
-        row = evaluation[section][key]
-        se0 = (row["high"] - row["low"]) / 2 / (norm.ppf(0.975) * widen0)
-        seed = networks * var_net
-        world = max(w0 * (se0**2 - seed / s0), 0.0)
-        estimate = next(v for k, v in row.items() if k.endswith("difference"))
-        out[name] = (estimate, world, seed)
+    for primary, pairs in FROM_SEEDS.items():
+        if all(a in ious for a, _ in pairs) and all(b in ious for _, b in pairs):
+            found = [components(ious[a], ious[b]) for a, b in pairs]
+            out[primary] = min(found, key=lambda c: c["estimate"])  # the intersection-union test's weakest member
     return out
 
 
-def power(variance: tuple[float, float], worlds: int, seeds: int, effect: float, level: float) -> tuple[float, float]:
-    """(the interval's expected half-width at `level`, the power for `effect`) at a design; variance: (sigma_w^2, sigma_s^2)."""
-    se = math.sqrt(variance[0] / worlds + variance[1] / seeds)
+def from_retired(evaluation: dict) -> dict[str, dict[str, float]]:
+    """A comparison's whole spread in the retired run's interval (drawn with t(n - 1) / z), as the worlds'."""
+    worlds = evaluation["uncertainty"]["test_set"]["worlds"]
+    widen = t.ppf(0.975, worlds - 1) / norm.ppf(0.975)
+    out = {}
+    for primary, compare in FROM_RETIRED.items():
+        section, key = compare.split("/")
+        row = evaluation[section][key]
+        se = (row["high"] - row["low"]) / 2 / (norm.ppf(0.975) * widen)
+        estimate = next(v for k, v in row.items() if k.endswith("difference"))
+        out[primary] = {
+            "estimate": estimate,
+            "world": worlds * se**2,
+            "block": 0.0,
+            "seed": 0.0,
+            "world_x_seed": 0.0,
+            "worlds": worlds,
+            "seeds": 0,
+        }
+    return out
+
+
+def power(c: dict[str, float], worlds: int, seeds: int, effect: float, level: float) -> tuple[float, float]:
+    """(the interval's expected half-width at `level`, the power for `effect`) at a design."""
+    variance = c["world"] / worlds + c["block"] / (worlds * BLOCKS_PER_WORLD) + c["seed"] / seeds + c["world_x_seed"] / (worlds * seeds)
+    se = math.sqrt(variance)
     z = norm.ppf(1 - (1 - level) / 2) * small_sample_factor(worlds, level)
     return z * se, float(norm.cdf(effect / se - z))
 
@@ -82,52 +154,57 @@ def power(variance: tuple[float, float], worlds: int, seeds: int, effect: float,
 def unit_costs(times: dict, worlds: dict[str, int], seeds: int) -> tuple[float, float, float]:
     """(seconds per main test world, per seed, the rest) from a run's stage times."""
     stages = times["stages"]
-    rendered = sum(worlds.values())
     per_world = sum(v for k, v in stages.items() if k.startswith(PER_WORLD)) / worlds["main"]
-    per_world += sum(v for k, v in stages.items() if k.startswith(SHARED_BY_WORLDS)) / rendered
+    per_world += sum(v for k, v in stages.items() if k.startswith(SHARED_BY_WORLDS)) / sum(worlds.values())
     per_seed = sum(v for k, v in stages.items() if k.startswith(PER_SEED)) / seeds
-    rest = times["total_s"] - per_world * worlds["main"] - per_seed * seeds
-    return per_world, per_seed, rest
+    return per_world, per_seed, times["total_s"] - per_world * worlds["main"] - per_seed * seeds
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("evaluation", type=Path, help="metrics/evaluation.json of a run on development worlds")
-    parser.add_argument("pipeline_time", type=Path, help="that run's metrics/pipeline_time.json")
-    parser.add_argument("--worlds", type=int, nargs="+", default=[7, 10, 12, 16, 21, 24])
+    parser.add_argument("spread", type=Path, nargs="*", help="seed_spread.py --json files scored on the development set")
+    parser.add_argument("--retired", type=Path, required=True, help="the retired main test set's metrics/evaluation.json")
+    parser.add_argument("--times", type=Path, required=True, help="that run's metrics/pipeline_time.json")
+    parser.add_argument("--rendered", default="drives=16,development=7,main=7,stress=20", help="that run's worlds by kind")
+    parser.add_argument("--worlds", type=int, nargs="+", default=[7, 10, 12, 16, 20, 24])
     parser.add_argument("--seeds", type=int, nargs="+", default=[2, 5, 10])
-    parser.add_argument("--family", type=int, default=2, help="Holm's family size: the strictest level is alpha / family")
+    parser.add_argument("--family", type=int, default=3, help="Holm's family: the strictest level is alpha / family")
     parser.add_argument("--alpha", type=float, default=0.05)
     parser.add_argument("--effect", type=float, default=0.02, help="the planning effect (IoU; normalised angle for the open loop)")
-    parser.add_argument("--central-effect", type=float, default=0.10, help="the central claim's planning effect")
-    parser.add_argument("--rendered", default="drives=16,development=7,main=7,stress=20", help="the run's worlds by kind")
     args = parser.parse_args()
-    evaluation = json.loads(args.evaluation.read_text())
-    found = components(evaluation)
-    print("| primary | development estimate | world sd | seed sd (per seed) |")
-    print("| --- | --- | --- | --- |")
-    for name, (estimate, world, seed) in found.items():
-        print(f"| {name} | {estimate:+.4f} | {math.sqrt(world):.4f} | {math.sqrt(seed):.4f} |")
+    cfg = load_config()
+    retired = json.loads(args.retired.read_text())
+    found = from_retired(retired) | from_seed_runs(args.spread, cfg.split.block_m, Path(cfg.split.labels_dir))
+    print(
+        "| primary | estimate | world sd | block sd | seed sd | world x seed sd | measured on |\n" + "| --- " * 7 + "|"
+    )
+    for name, c in found.items():
+        where = (
+            f"{c['worlds']} development worlds, {c['seeds']} seeds" if c["seeds"] else f"the retired run's interval ({c['worlds']} worlds)"
+        )
+        sds = " | ".join(f"{math.sqrt(c[k]):.4f}" for k in ("world", "block", "seed", "world_x_seed"))
+        print(f"| {name} | {c['estimate']:+.4f} | {sds} | {where} |")
     level = 1 - args.alpha / args.family
-    effects = f"{args.effect}; central claim {args.central_effect}"
-    print(f"\nHalf-width at the Holm level {level:.4f} and power for the planning effect ({effects}):\n")
-    worlds = dict(item.split("=") for item in args.rendered.split(","))
-    per_world, per_seed, rest = unit_costs(json.loads(args.pipeline_time.read_text()), {k: int(v) for k, v in worlds.items()},
-                                           evaluation["uncertainty"]["test_set"]["seeds"])  # fmt: skip
+    rendered = {k: int(v) for k, v in (item.split("=") for item in args.rendered.split(","))}
+    per_world, per_seed, rest = unit_costs(json.loads(args.times.read_text()), rendered, retired["uncertainty"]["test_set"]["seeds"])
     names = list(found)
-    print("| worlds | seeds | " + " | ".join(names) + " | minutes on 2 cores |")
-    print("| --- | --- | " + " | ".join("---" for _ in names) + " | --- |")
+    effects = ", ".join(f"{n} {PLANNING_EFFECT.get(n, args.effect):g}" for n in names)
+    print(f"\nHalf-width at Holm's strictest level ({level:.4f}, family {args.family}) and power for the planning effect ({effects}):\n")
+    print(
+        "| worlds | seeds | "
+        + " | ".join(names)
+        + " | minutes on 2 cores |\n| --- | --- | "
+        + " | ".join("---" for _ in names)
+        + " | --- |"
+    )
     for w in args.worlds:
         for s in args.seeds:
             cells = []
             for name in names:
-                _, world, seed = found[name]
-                effect = args.central_effect if name == "central_claim" else args.effect
-                half, p = power((world, seed), w, s, effect, level)
+                half, p = power(found[name], w, s, PLANNING_EFFECT.get(name, args.effect), level)
                 cells.append(f"±{half:.3f}, {100 * p:.0f} %")
-            minutes = (rest + per_world * w + per_seed * s) / 60
-            print(f"| {w} | {s} | " + " | ".join(cells) + f" | {minutes:.0f} |")
-    print(f"\nunit costs: {per_world:.0f} s per main test world, {per_seed:.0f} s per seed, {rest:.0f} s the rest")
+            print(f"| {w} | {s} | " + " | ".join(cells) + f" | {(rest + per_world * w + per_seed * s) / 60:.0f} |")
+    print(f"\nunit costs: {per_world:.0f} s per main test world, {per_seed:.0f} s per seed, {rest:.0f} s the rest (the retired run)")
 
 
 if __name__ == "__main__":

@@ -182,9 +182,13 @@ def test_scores_against_hand_counts():
     # 1 intervention in 60 m: 16.7 per km; 12 s driven: 1 - 6 / 12 = 50 % autonomy.
     assert s.per_km.estimate == pytest.approx(1000 / 60)
     assert s.autonomy_pct.estimate == pytest.approx(50.0)
-    assert s.per_km.low == 0.0 and s.per_km.high == pytest.approx(1000 / 20)
+    # the rate's exact Poisson interval, 1 event in 0.06 km: chi2(0.025, 2) / 2 = 0.02532 and chi2(0.975, 4) / 2 = 5.5716
+    assert s.per_km.low == pytest.approx(0.025318 / 0.06, rel=1e-4) and s.per_km.high == pytest.approx(5.571643 / 0.06, rel=1e-4)
+    none = score([log("unet", 0, 20.0)] * 3, 6.0, resampling).per_km  # none in 60 m: not [0, 0]
+    assert none.low == 0.0 and none.high == pytest.approx(3.688879 / 0.06, rel=1e-4)
     comparisons = versus_end_to_end({"unet": a, "pilotnet": b}, ["pilotnet"], resampling)
-    difference = comparisons["unet", "pilotnet"]
+    difference, exact_p = comparisons["unet", "pilotnet"]
     assert difference.estimate == pytest.approx((1 - 4) * 1000 / 60)
     assert difference.high < 0  # every drive: one fewer; every resample is below 0
-    assert "interval below 0: unet - pilotnet" in finding(comparisons) and "exploratory" in finding(comparisons)
+    assert exact_p == pytest.approx(0.375)  # 1 of 5 at even chance, two-sided: the exact test does not reject
+    assert "interval below 0: unet - pilotnet" in finding(comparisons) and "exact p 0.3750" in finding(comparisons)

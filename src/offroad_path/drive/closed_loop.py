@@ -21,8 +21,8 @@ import numpy as np
 
 from offroad_path.drive.loop import DriveLog
 from offroad_path.report.rendering import ARGUMENTS, argument_markdown
-from offroad_path.statistics.bootstrap import Interval, Resampling, drawn, paired_draws, whole
-from offroad_path.statistics.counts import compare_rates, power_sentence, route_needed
+from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, drawn, paired_draws, whole
+from offroad_path.statistics.counts import compare_rates, power_sentence, rate_interval, route_needed
 from offroad_path.statistics.primaries import check_declared, holm_levels, owned, recorded
 
 
@@ -86,23 +86,27 @@ def score(logs: list[DriveLog], intervention_s: float, resampling: Resampling) -
     blocks, seeds = resampling.weights(worlds, s.shape[0])  # (count, drives), (count, seeds)
     resampled = drawn(s, blocks, seeds)  # (count, 5)
 
-    def ratio(fn) -> Interval:
-        return Interval(float(fn(whole(s))), *resampling.percentiles(fn(resampled)))
+    def ratio(fn) -> Interval:  # widened for the worlds it resamples, as evaluate's and the paired intervals are
+        return Draws(float(fn(whole(s))), fn(resampled), resampling, len(set(worlds))).interval()
 
     logs = ordered(logs)
     offsets = [np.asarray(g.offsets) for g in logs]
     causes = [why for g in logs for _, _, why in g.interventions]
     total = whole(s)
+    # Interventions are rare counts: their rate's interval is the exact Poisson one (the exact test's kind),
+    # which a resample of drives with none cannot give.
+    p95 = float(np.percentile(np.concatenate(offsets), 95))
+    rate = Interval(float(_per_km(total)), *rate_interval(int(total[0]), float(total[1]) / 1000.0, resampling.level))
     return PolicyScore(
         policy=logs[0].policy,
         drives=len(logs),
         route_m=float(total[1]),
         distance_m=sum(g.distance_m for g in logs),
         interventions=int(total[0]),
-        per_km=ratio(_per_km),
+        per_km=rate,
         autonomy_pct=ratio(lambda c: 100.0 * (1.0 - c[..., 0] * intervention_s / c[..., 2])),
         mean_offset_m=ratio(lambda c: c[..., 3] / c[..., 4]),
-        p95_offset_m=Interval(float(np.percentile(np.concatenate(offsets), 95)), *resampling.percentiles(_p95(offsets, blocks, seeds))),
+        p95_offset_m=Draws(p95, _p95(offsets, blocks, seeds), resampling, len(set(worlds))).interval(),
         water_per_km=1000.0 * sum(g.water_entries for g in logs) / max(float(total[1]), 1e-9),  # per km of route
         no_path_steps=sum(g.no_path for g in logs),
         by_cause={why: causes.count(why) for why in sorted(set(causes))},
@@ -122,16 +126,21 @@ def _p95(offsets: list[np.ndarray], blocks: np.ndarray, seeds: np.ndarray) -> np
     return values[np.minimum(at, len(values) - 1)]
 
 
-def versus_end_to_end(logs: dict[str, list[DriveLog]], end_to_end: list[str], resampling: Resampling) -> dict[tuple[str, str], Interval]:
-    """{(path policy, PilotNet policy): path's interventions per km minus PilotNet's}, paired on the same
-    drives and seeds (exploratory: the primaries get the exact test)."""
+Comparison = tuple[Interval, float]  # the paired interval of a - b per km, and the exact test's two-sided p
+
+
+def versus_end_to_end(logs: dict[str, list[DriveLog]], end_to_end: list[str], resampling: Resampling) -> dict[tuple[str, str], Comparison]:
+    """{(path policy, PilotNet policy): (path's interventions per km minus PilotNet's, paired on the same
+    drives and seeds; the exact test's p of their pooled counts)}: exploratory, unless a primary names it."""
     pilots = [name for name in logs if name in end_to_end]
     paths = [name for name in logs if name not in end_to_end and name not in ("oracle", "straight")]
     found = {}
     for b in pilots:
         for a in paths:
             (sums_a, worlds), (sums_b, _) = sums(logs[a]), sums(logs[b])
-            found[a, b] = paired_draws(sums_a, sums_b, _per_km, resampling, worlds).interval()
+            total_a, total_b = whole(sums_a), whole(sums_b)
+            exact = compare_rates(int(total_a[0]), int(total_b[0]), total_a[1] / 1000.0, total_b[1] / 1000.0)
+            found[a, b] = paired_draws(sums_a, sums_b, _per_km, resampling, worlds).interval(), exact.p_value
     return found
 
 
@@ -153,14 +162,15 @@ def primary(logs: dict[str, list[DriveLog]], name: str, key: str, conclusions) -
     return entry
 
 
-def finding(comparisons: dict[tuple[str, str], Interval]) -> str:
+def finding(comparisons: dict[tuple[str, str], Comparison]) -> str:
     """One sentence: which path policies needed fewer or more interventions per km than which
-    end-to-end policy, by paired intervals that exclude 0; or that no difference was measured."""
+    end-to-end policy, by paired intervals that exclude 0, each with the exact test's p beside it (a
+    few counts: the two can disagree); or that no difference was measured."""
     if not comparisons:
         return "No end-to-end policy was driven: no comparison."
-    better = [f"{a} - {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.high < 0]
-    worse = [f"{a} - {b} ({i.difference_text(2)} per km)" for (a, b), i in comparisons.items() if i.low > 0]
-    same = [f"{a} and {b}" for (a, b), i in comparisons.items() if i.contains_zero]
+    better = [f"{a} - {b} ({i.difference_text(2)} per km; exact p {p:.4f})" for (a, b), (i, p) in comparisons.items() if i.high < 0]
+    worse = [f"{a} - {b} ({i.difference_text(2)} per km; exact p {p:.4f})" for (a, b), (i, p) in comparisons.items() if i.low > 0]
+    same = [f"{a} and {b} (exact p {p:.4f})" for (a, b), (i, p) in comparisons.items() if i.contains_zero]
     parts = ([f"interval below 0: {'; '.join(better)}"] if better else []) + ([f"above 0: {'; '.join(worse)}"] if worse else [])
     parts += [f"interval holding 0 between {', '.join(same)}"] if same else []
     return (
@@ -194,7 +204,7 @@ def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str], con
         metrics[argument] = {
             "policies": {s.policy: s.as_dict() for s in scores},
             "path_minus_end_to_end": {
-                f"{a} - {b}": {"value": i.estimate, "low": i.low, "high": i.high} for (a, b), i in comparisons.items()
+                f"{a} - {b}": {"value": i.estimate, "low": i.low, "high": i.high, "exact_p": p} for (a, b), (i, p) in comparisons.items()
             },
             "finding": sentence,
         }

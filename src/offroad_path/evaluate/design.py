@@ -12,7 +12,10 @@ from omegaconf import DictConfig, OmegaConf
 # The keys of evaluate's config that decide a verdict: the design file sets exactly these.
 DESIGN_KEYS = ("main_test_set", "seeds", "bootstrap", "conclusions")
 # How the intervals are drawn is code (statistics.bootstrap): named here, so that a change of method changes the hash.
-INTERVAL_METHOD = "hierarchical bootstrap of worlds, blocks and seeds; percentile interval widened by t(n-1)/z * sqrt(n/(n-1))"
+INTERVAL_METHOD = (
+    "hierarchical bootstrap of worlds, blocks and seeds; percentile interval widened at the worlds' and the seeds' levels: "
+    "each level's variance times n/(n-1), Student's t with their Welch-Satterthwaite degrees of freedom over z"
+)
 
 
 def design_values(e: DictConfig) -> dict:

@@ -210,8 +210,9 @@ def conditions_markdown(c: dict[str, dict], heading: str = "\n## Results by cond
         "of driving (conditions.csv of each sequence); a frame can be in several groups. The mean path prior shows how hard "
         "a group is for a network that ignores the image. Each figure pools the method's training seeds, with its 95 % "
         "hierarchical-bootstrap interval (the test worlds that hold the group's frames, their blocks, the seeds), and the "
-        "number of test sequences they come from; a group within one or two sequences says little. Exploratory: no "
-        "correction for multiplicity.\n",
+        "number of test sequences they come from; a group within one or two sequences says little, and an interval marked † "
+        "rests on one world: it resamples that world's blocks alone, without the widening for few worlds and without any "
+        "spread between worlds. Exploratory: no correction for multiplicity.\n",
     ]
     header = ["condition", "test images", "test sequences", *(title(m) if m in TITLES else method_title(m) for m in methods)]
     rows = [[title(key), row["frames"], row.get("sequences", ""), *(_condition_cell(row, m) for m in methods)] for key, row in c.items()]
@@ -219,9 +220,13 @@ def conditions_markdown(c: dict[str, dict], heading: str = "\n## Results by cond
 
 
 def _condition_cell(row: dict, method: str) -> str:
-    """A method's IoU in one group, with its interval where the group's blocks allow one."""
+    """A method's IoU in one group, with its interval where the group's blocks allow one; an interval
+    whose frames lie in one world resamples that world's blocks alone, unwidened, and says so (†)."""
     iou = fmt(row[method]) if row.get(method) is not None else "n/a"
-    return iou + (" [{:.3f}, {:.3f}]".format(*row[f"{method}.interval"]) if f"{method}.interval" in row else "")
+    if f"{method}.interval" not in row:
+        return iou
+    one_world = "†" if row.get("sequences") == 1 else ""
+    return iou + " [{:.3f}, {:.3f}]{}".format(*row[f"{method}.interval"], one_world)
 
 
 def _against_prior(row: dict, title: str) -> str:
@@ -327,9 +332,11 @@ def drive_table(policies: dict[str, dict]) -> str:
 
 
 def comparison_table(differences: dict[str, dict]) -> str:
-    """Path minus end to end per pair ("a - b" -> value, low, high: the metrics' path_minus_end_to_end)."""
-    rows = [[*pair.split(" - ", 1), _interval_of(i).difference_text(2)] for pair, i in differences.items()]
-    return grid(["path policy", "end to end", "interventions per km, path - end to end [95 % CI]"], rows)
+    """Path minus end to end per pair ("a - b" -> value, low, high, exact_p: the metrics' path_minus_end_to_end),
+    with the exact test of the pooled counts beside the hierarchical interval."""
+    rows = [[*pair.split(" - ", 1), _interval_of(i).difference_text(2), f"{i['exact_p']:.4f}" if "exact_p" in i else ""]
+            for pair, i in differences.items()]  # fmt: skip
+    return grid(["path policy", "end to end", "interventions per km, path - end to end [95 % CI]", "exact test p"], rows)
 
 
 def argument_markdown(argument: str, entry: dict, heading: str = "##") -> str:

@@ -35,6 +35,24 @@ RESAMPLES = 1000
 LEVEL = 0.95
 
 
+def two_level_factor(world_var: float, seed_var: float, worlds: int, seeds: int, level: float) -> float:
+    """The widening of an interval that resamples `worlds` worlds and `seeds` seeds, each level a few
+    units: each level's bootstrap variance (world_var with the seeds held, seed_var with the worlds
+    held) scaled by n / (n - 1), the bootstrap's small-sample bias at that level, and Student's t with
+    the Welch-Satterthwaite degrees of freedom of the two (Satterthwaite 1946) over the normal
+    quantile. A comparison whose spread is the seeds' (two seeds: one degree of freedom) gets the
+    wide interval two seeds can give; one whose spread is the worlds' gets small_sample_factor."""
+    from scipy.stats import norm, t
+
+    parts = [(v * n / (n - 1), n - 1) for v, n in ((world_var, worlds), (seed_var, seeds)) if n >= 2 and v > 0]
+    if not parts:
+        return small_sample_factor(worlds, level)
+    corrected = sum(v for v, _ in parts)
+    df = corrected**2 / sum(v**2 / d for v, d in parts)
+    tail = 1.0 - (1.0 - level) / 2.0
+    return float(t.ppf(tail, df) / norm.ppf(tail) * math.sqrt(corrected / (world_var + seed_var)))
+
+
 def small_sample_factor(worlds: int, level: float) -> float:
     """How much wider than the percentile interval an interval over `worlds` resampled worlds is drawn:
     Student's t quantile with worlds - 1 degrees of freedom over the normal one, the small-sample
@@ -158,13 +176,19 @@ class Draws:
     values: np.ndarray  # (count,)
     resampling: Resampling
     worlds: int = 0  # the worlds the top level resamples (small_sample_factor); 0: the plain percentile interval
+    # With several training seeds: the bootstrap variance of the worlds' level (seeds held) and of the
+    # seeds' (worlds and blocks held), and the seeds' number, for two_level_factor.
+    levels: tuple[float, float, int] | None = None
 
     def interval(self, level: float | None = None) -> Interval:
         """The percentile interval at `level` (the resampling's by default), each side's distance from
-        the estimate stretched by small_sample_factor."""
+        the estimate stretched by small_sample_factor, or with seeds two_level_factor."""
         level = self.resampling.level if level is None else level
         low, high = self.resampling.percentiles(self.values, level)
-        widen = small_sample_factor(self.worlds, level)
+        if self.levels is not None and self.worlds >= 2:
+            widen = two_level_factor(self.levels[0], self.levels[1], self.worlds, self.levels[2], level)
+        else:
+            widen = small_sample_factor(self.worlds, level)
         return Interval(self.estimate, self.estimate - widen * (self.estimate - low), self.estimate + widen * (high - self.estimate))
 
     def p_value(self) -> float:
@@ -193,13 +217,33 @@ class Draws:
         return float(high)
 
 
+def _level_variances(score_of, blocks: np.ndarray, seed_weights: np.ndarray) -> tuple[float, float, int] | None:
+    """(variance with the seeds held, variance with the worlds and blocks held, seeds) of a score over
+    the same draw; None with one seed. score_of(blocks, seed weights) -> (count,) values."""
+    count, seeds = seed_weights.shape
+    if seeds < 2:
+        return None
+
+    def variance(values: np.ndarray) -> float:
+        finite = values[np.isfinite(values)]
+        return float(finite.var()) if len(finite) > 1 else 0.0
+
+    held_seeds, held_blocks = np.ones((count, seeds)), np.ones_like(blocks)
+    return variance(score_of(blocks, held_seeds)), variance(score_of(held_blocks, seed_weights)), seeds
+
+
 def score_draws(sums: np.ndarray, score: Score, resampling: Resampling, worlds: Sequence[Hashable] | None = None) -> Draws:
     """`score` over hierarchical resamples of `sums` ((B, k) or (S, B, k)); worlds: each block's
     (None: every block its own world, a flat block bootstrap)."""
     seeds = sums.shape[0] if sums.ndim == 3 else 1
     worlds = list(range(sums.shape[-2])) if worlds is None else worlds
     blocks, seed_weights = resampling.weights(worlds, seeds)
-    return Draws(float(score(whole(sums))), score(drawn(sums, blocks, seed_weights)), resampling, len(set(worlds)))
+
+    def score_of(b: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return score(drawn(sums, b, s))
+
+    levels = _level_variances(score_of, blocks, seed_weights)
+    return Draws(float(score(whole(sums))), score_of(blocks, seed_weights), resampling, len(set(worlds)), levels)
 
 
 def paired_draws(a: np.ndarray, b: np.ndarray, score: Score, resampling: Resampling, worlds: Sequence[Hashable] | None = None) -> Draws:
@@ -213,8 +257,12 @@ def paired_draws(a: np.ndarray, b: np.ndarray, score: Score, resampling: Resampl
             raise ValueError(f"paired runs must have one number of seeds, have {a.shape[0]} and {b.shape[0]}")
     worlds = list(range(a.shape[-2])) if worlds is None else worlds
     blocks, seed_weights = resampling.weights(worlds, seeds)
-    difference = score(drawn(a, blocks, seed_weights)) - score(drawn(b, blocks, seed_weights))
-    return Draws(float(score(whole(a)) - score(whole(b))), difference, resampling, len(set(worlds)))
+
+    def difference(w: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return score(drawn(a, w, s)) - score(drawn(b, w, s))
+
+    levels = _level_variances(difference, blocks, seed_weights)
+    return Draws(float(score(whole(a)) - score(whole(b))), difference(blocks, seed_weights), resampling, len(set(worlds)), levels)
 
 
 def interval(sums: np.ndarray, score: Score, resampling: Resampling = Resampling(), worlds: Sequence[Hashable] | None = None) -> Interval:

@@ -46,6 +46,15 @@ class RateComparison:
         return self.route_a_km / (self.route_a_km + self.route_b_km)
 
 
+def rate_interval(count: int, km: float, level: float) -> tuple[float, float]:
+    """The exact (Garwood 1936) interval of a Poisson rate per km from `count` events over `km`: never
+    [0, 0] for no event (0 of 0 interventions says the rate is small, not that it is 0)."""
+    tail = (1.0 - level) / 2.0
+    low = 0.0 if count == 0 else stats.chi2.ppf(tail, 2 * count) / 2.0
+    high = stats.chi2.ppf(1.0 - tail, 2 * (count + 1)) / 2.0
+    return float(low / km), float(high / km)
+
+
 def compare_rates(a: int, b: int, route_a_km: float, route_b_km: float) -> RateComparison:
     """The exact conditional test of equal intervention rates (module docstring)."""
     if route_a_km <= 0 or route_b_km <= 0:
