@@ -21,7 +21,7 @@ open loop are not in those runs: their spread is the retired run's interval (--r
 wholly as the worlds'.
 
 Power at Holm's strictest level alpha / family, two-sided, with the intervals' small-sample widening
-at W worlds: Phi(effect / SE - z * widen(W)). Cost: the retired run's stage times (--times) split
+at W worlds and S seeds as the reports draw it: Phi(effect / SE - z * widen). Cost: the retired run's stage times (--times) split
 into seconds per main test world, per seed and the rest.
 """
 
@@ -38,7 +38,7 @@ from scipy.stats import norm, t
 
 from offroad_path.config import load_config
 from offroad_path.data.labels import read_label_run
-from offroad_path.statistics.bootstrap import small_sample_factor
+from offroad_path.statistics.bootstrap import two_level_factor
 from offroad_path.statistics.scores import Scores
 
 BLOCKS_PER_WORLD = 4.5  # the main test set's mean (stream 5's first 20 worlds: 91 blocks)
@@ -144,10 +144,14 @@ def from_retired(evaluation: dict) -> dict[str, dict[str, float]]:
 
 
 def power(c: dict[str, float], worlds: int, seeds: int, effect: float, level: float) -> tuple[float, float]:
-    """(the interval's expected half-width at `level`, the power for `effect`) at a design."""
-    variance = c["world"] / worlds + c["block"] / (worlds * BLOCKS_PER_WORLD) + c["seed"] / seeds + c["world_x_seed"] / (worlds * seeds)
-    se = math.sqrt(variance)
-    z = norm.ppf(1 - (1 - level) / 2) * small_sample_factor(worlds, level)
+    """(the interval's expected half-width at `level`, the power for `effect`) at a design: the
+    estimate's spread from the components, the interval's widening as the reports draw it
+    (two_level_factor, from the bootstrap's expected variance at each level, (n - 1) / n of the true)."""
+    world = c["world"] / worlds + c["block"] / (worlds * BLOCKS_PER_WORLD) + c["world_x_seed"] / (worlds * seeds)
+    seed = c["seed"] / seeds
+    se = math.sqrt(world + seed)
+    widen = two_level_factor(world * (worlds - 1) / worlds, seed * (seeds - 1) / seeds, worlds, seeds, level)
+    z = norm.ppf(1 - (1 - level) / 2) * widen * math.sqrt((world * (worlds - 1) / worlds + seed * (seeds - 1) / seeds) / (world + seed))
     return z * se, float(norm.cdf(effect / se - z))
 
 

@@ -2,7 +2,7 @@
 has (a grid made smaller: fewer seeds, a network removed) and delete committed files under metrics/
 that no stage of any dvc.yaml of the repository declares (outs, metrics, plots).
 
-    python tools/prune_lock.py [--dry-run] [--delete-untracked]
+    python tools/prune_lock.py [--dry-run] [--delete-untracked] [--stage-removed]
 
 `dvc repro` updates the entries of the stages it runs and keeps every other entry, so after a
 grid shrinks the lock pins stages that no longer exist and metrics/ keeps their files, which
@@ -10,8 +10,12 @@ grid shrinks the lock pins stages that no longer exist and metrics/ keeps their 
 
 What may go is decided from the pipelines' declarations, never from the lock: a stage missing from
 dvc.lock (not run yet, or a reset lock) keeps its outputs. A file git does not track (your notes)
-is listed and kept unless `--delete-untracked` asks. A malformed or missing dvc.lock is one line
-naming it, exit status 2.
+is listed and kept unless `--delete-untracked` asks; a committed file with uncommitted changes is
+listed and kept. Nothing goes unless DVC parsed every pipeline file whole (dvc.yaml, the others, and
+the `vars` files they read) and dvc.yaml declares a stage; and a stage of dvc.lock that dvc.yaml
+lacks altogether (not one member of a matrix fewer) is taken for a cut or broken dvc.yaml unless
+`--stage-removed` says you removed it. A malformed or missing dvc.lock or pipeline file is one line
+naming it, exit status 2, nothing changed.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ RECORDS = ("metrics/pipeline_time.json",)
 
 
 class LockError(Exception):
-    """dvc.lock cannot be read as a lock: the one line that says why."""
+    """dvc.lock or a pipeline file cannot be trusted to say what may go: the one line that says why."""
 
 
 def read_lock(root: Path) -> dict[str, dict]:
@@ -53,26 +57,51 @@ def read_lock(root: Path) -> dict[str, dict]:
 def pipelines(root: Path) -> tuple[set[str], set[Path]]:
     """(the stage names of root's dvc.yaml, matrix stages expanded; every output path that any
     dvc.yaml of the repository declares, absolute)."""
+    from dvc.exceptions import DvcException
     from dvc.repo import Repo
 
-    with Repo(str(root)) as repo:
-        stages = list(repo.index.stages)
-    main = str(root / "dvc.yaml")
-    names = {stage.name for stage in stages if stage.dvcfile.path == main}
+    main = root / "dvc.yaml"
+    if not main.is_file():
+        raise LockError(f"{main}: no such file (without it nothing says which outputs are declared)")
+    if not main.read_text().strip():
+        raise LockError(f"{main}: empty (without a stage nothing says which outputs are declared)")
+    try:
+        with Repo(str(root)) as repo:
+            stages = list(repo.index.stages)
+    except DvcException as e:
+        where = getattr(e, "path", None) or main
+        raise LockError(f"{where}: DVC cannot parse it ({type(e).__name__}: {str(e).strip().splitlines()[0]})") from None
+    names = {stage.name for stage in stages if stage.dvcfile.path == str(main)}
+    if not names:
+        raise LockError(f"{main}: declares no stage")
     declared = {Path(out.fs_path) for stage in stages for out in stage.outs}
     return names, declared
 
 
-def tracked(root: Path) -> set[Path]:
-    """The files under metrics/ that git tracks (committed or staged)."""
-    listed = subprocess.run(["git", "ls-files", "-z", "metrics"], cwd=root, capture_output=True, text=True, check=False)
+def removed_stages(lock: dict, names: set[str]) -> list[str]:
+    """Stages of the lock that dvc.yaml lacks altogether: not a matrix member fewer (train_scratch@unet-9
+    beside train_scratch@unet-0), a whole stage gone."""
+    kept = {name.split("@")[0] for name in names}
+    return sorted({name.split("@")[0] for name in lock} - kept)
+
+
+def tracked(root: Path, *options: str) -> set[Path]:
+    """The files under metrics/ that git tracks (committed or staged); with `--modified`, those whose
+    working copy differs from the index."""
+    listed = subprocess.run(["git", "ls-files", "-z", *options, "metrics"], cwd=root, capture_output=True, text=True, check=False)
     return {root / name for name in listed.stdout.split("\0") if name} if listed.returncode == 0 else set()
 
 
-def orphans(root: Path = ROOT) -> tuple[list[str], list[Path]]:
-    """(dvc.lock entries of no stage, files under metrics/ that no stage of any dvc.yaml declares)."""
+def orphans(root: Path = ROOT, stage_removed: bool = False) -> tuple[list[str], list[Path]]:
+    """(dvc.lock entries of no stage, files under metrics/ that no stage of any dvc.yaml declares);
+    LockError when a stage of the lock is gone from dvc.yaml altogether, unless stage_removed."""
     lock = read_lock(root)
     names, declared = pipelines(root)
+    if (gone := removed_stages(lock, names)) and not stage_removed:
+        raise LockError(
+            f"{root / 'dvc.yaml'}: has no stage {gone[0]}, which dvc.lock records: a cut or broken dvc.yaml? "
+            "(--stage-removed if you removed it on purpose)"
+        )
     records = {root / record for record in RECORDS}
     files = sorted(
         path
@@ -94,18 +123,21 @@ def main(argv: list[str] | None = None, root: Path = ROOT) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dry-run", action="store_true", help="list what would go, change nothing")
     parser.add_argument("--delete-untracked", action="store_true", help="also delete listed files git does not track")
+    parser.add_argument("--stage-removed", action="store_true", help="a stage of dvc.lock was removed from dvc.yaml on purpose")
     args = parser.parse_args(argv)
     try:
-        entries, files = orphans(root)
+        entries, files = orphans(root, args.stage_removed)
     except LockError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    committed = tracked(root)
+    committed, edited = tracked(root), tracked(root, "--modified")
     untracked = [path for path in files if path not in committed and owner(path) == path]  # a stage's marker is never yours
     for name in entries:
         print(f"dvc.lock: {name}")
     for path in files:
-        print(f"{path.relative_to(root)}{' (untracked: kept without --delete-untracked)' if path in untracked else ''}")
+        note = " (untracked: kept without --delete-untracked)" if path in untracked else ""
+        note = " (uncommitted changes: kept)" if path in edited else note
+        print(f"{path.relative_to(root)}{note}")
     if args.dry_run:
         return 0
     if entries:
@@ -116,7 +148,7 @@ def main(argv: list[str] | None = None, root: Path = ROOT) -> int:
         tmp.write_text(yaml.safe_dump(lock, sort_keys=False, width=1000))
         tmp.replace(lock_path)
     for path in files:
-        if path not in untracked or args.delete_untracked:
+        if path not in edited and (path not in untracked or args.delete_untracked):
             path.unlink()
     return 0
 

@@ -96,3 +96,56 @@ def test_a_missing_or_malformed_lock_is_one_line_naming_it(repo, capsys, lock, s
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"error: {repo / 'dvc.lock'}: ") and says in err and len(err.splitlines()) == 1
     assert committed_metrics(repo) == before
+
+
+def _cut(repo, name: str, size: int) -> None:
+    path = repo / name
+    path.write_bytes(path.read_bytes()[:size])
+
+
+@pytest.mark.slow(seconds=10)
+@pytest.mark.parametrize(
+    ("breakage", "file", "says"),
+    [
+        (lambda repo: (repo / "dvc.yaml").write_text(""), "dvc.yaml", "empty"),
+        (lambda repo: (repo / "dvc.yaml").unlink(), "dvc.yaml", "no such file"),
+        (lambda repo: _cut(repo, "dvc.yaml", 1500), "dvc.yaml", "a cut or broken dvc.yaml?"),
+        (
+            lambda repo: (repo / "dvc.yaml").write_text("vars:\n  - conf/evaluate/default.yaml\nstages: {}\n"),
+            "dvc.yaml",
+            "declares no stage",
+        ),
+        (lambda repo: (repo / "dvc.yaml").write_text("stages:\n  label: [unclosed\n"), "dvc.yaml", "DVC cannot parse it"),
+        (lambda repo: (repo / "dvc.yaml").write_text("stages:\n  label:\n    cmd: x\n    outz: [a]\n"), "dvc.yaml", "DVC cannot parse it"),
+        (lambda repo: (repo / "tour" / "dvc.yaml").write_text("stages: [unclosed\n"), "tour/dvc.yaml", "DVC cannot parse it"),
+        (lambda repo: (repo / "conf/evaluate/design/laptop.yaml").write_text("seeds: [unclosed\n"), "laptop.yaml", "DVC cannot"),
+    ],
+    ids=["empty", "missing", "cut at 1500 bytes", "no stage", "syntax error", "misspelt key", "another pipeline broken", "vars file"],
+)
+def test_a_broken_pipeline_file_deletes_nothing_and_is_one_line(repo, capsys, breakage, file, says):
+    """The critical case: a missing, empty, cut or unparsable dvc.yaml read as "no stages" would delete
+    every committed metrics file and lock entry."""
+    before, lock = committed_metrics(repo), (repo / "dvc.lock").read_text()
+    breakage(repo)
+    assert prune_lock.main([], root=repo) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and file in err, err
+    assert committed_metrics(repo) == before and (repo / "dvc.lock").read_text() == lock
+
+
+@pytest.mark.slow(seconds=8)
+def test_a_committed_orphan_with_uncommitted_edits_is_kept_and_a_removed_stage_needs_saying(repo, capsys):
+    stale = repo / "metrics" / "steering" / "seed7.json"
+    stale.write_text("{}\n")
+    git(repo, "add", str(stale))
+    stale.write_text('{"my": "edit"}\n')  # changed since it was staged: the edit would be lost
+    assert prune_lock.main([], root=repo) == 0
+    assert "metrics/steering/seed7.json (uncommitted changes: kept)" in capsys.readouterr().out and stale.exists()
+    # a whole stage gone from dvc.yaml: refused until the user says so
+    pipeline = yaml.safe_load((repo / "dvc.yaml").read_text())
+    del pipeline["stages"]["drive"]
+    (repo / "dvc.yaml").write_text(yaml.safe_dump(pipeline, sort_keys=False))
+    assert prune_lock.main([], root=repo) == 2 and "has no stage drive" in capsys.readouterr().err
+    assert "metrics/drive.json" in committed_metrics(repo)
+    assert prune_lock.main(["--stage-removed"], root=repo) == 0
+    assert "metrics/drive.json" not in committed_metrics(repo) and "drive" not in yaml.safe_load((repo / "dvc.lock").read_text())["stages"]
