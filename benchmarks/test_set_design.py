@@ -179,9 +179,7 @@ def main() -> None:
     cfg = load_config()
     retired = json.loads(args.retired.read_text())
     found = from_retired(retired) | from_seed_runs(args.spread, cfg.split.block_m, Path(cfg.split.labels_dir))
-    print(
-        "| primary | estimate | world sd | block sd | seed sd | world x seed sd | measured on |\n" + "| --- " * 7 + "|"
-    )
+    print("| primary | estimate | world sd | block sd | seed sd | world x seed sd | measured on |\n" + "| --- " * 7 + "|")
     for name, c in found.items():
         where = (
             f"{c['worlds']} development worlds, {c['seeds']} seeds" if c["seeds"] else f"the retired run's interval ({c['worlds']} worlds)"

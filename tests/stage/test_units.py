@@ -230,3 +230,20 @@ def test_a_checkpoint_with_nan_weights_is_refused_naming_the_weight(tmp_path):
     save_weights(tmp_path / "diverged.ckpt", task)
     with pytest.raises(CheckpointError, match=rf"diverged\.ckpt: weight {re.escape(first)} holds NaN or infinite values"):
         load_checkpoint(tmp_path / "diverged.ckpt")
+
+
+def test_a_checkpoint_with_flipped_bytes_is_refused_naming_the_damaged_member(tmp_path):
+    """64 flipped bytes inside a weight tensor load as finite, wrong weights; the zip's CRC tells."""
+    from offroad_path.training.checkpoints import CheckpointError, load_checkpoint, save_weights
+    from offroad_path.training.task import SegmentationTask
+
+    task = SegmentationTask(model="unet", num_classes=2, width=0.125, lr=0.01, lr_milestones=[], lr_gamma=0.1, lr_warmup=0.0,
+                            momentum=0.9, weight_decay=0.0, channels_last=False)  # fmt: skip
+    save_weights(tmp_path / "best.ckpt", task)
+    data = bytearray((tmp_path / "best.ckpt").read_bytes())
+    middle = len(data) // 2  # inside the largest tensor's stored bytes
+    data[middle : middle + 64] = bytes(b ^ 0x01 for b in data[middle : middle + 64])  # low bits: still finite floats
+    (tmp_path / "flipped.ckpt").write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match=r"flipped\.ckpt: damaged, its member \S+ fails the archive's CRC check"):
+        load_checkpoint(tmp_path / "flipped.ckpt")
+    assert load_checkpoint(tmp_path / "best.ckpt")["hyper_parameters"]["model"] == "unet"  # the intact copy loads

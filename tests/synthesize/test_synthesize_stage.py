@@ -26,7 +26,7 @@ from offroad_path.world.classes import CLASS_NAMES
 TINY = ("synthesize.sequences=2", "world.frames=3", "world.width=160", "world.height=96", "synthesize.workers=2",
         "synthesize.test_worlds.min_blocks=0")  # fmt: skip
 HELD_OUT = ("synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.per_stress=0", "synthesize.test_worlds.horizon_m=0.5",
-            "synthesize.test_worlds.development_blocks=0")  # fmt: skip
+            "synthesize.test_worlds.development_blocks=0", "synthesize.test_worlds.retired_blocks=0")  # fmt: skip
 
 
 @pytest.mark.slow(seconds=10)

@@ -10,7 +10,15 @@ import pytest
 from offroad_path.looks import axis_values
 from offroad_path.world.conditions import frame_conditions
 from offroad_path.world.groups import GROUPS
-from offroad_path.world.held_out import DEVELOPMENT_STREAM, MIN_FRAMES, RETIRED_STREAM, choose_held_out_worlds, held_out_seed, stress_seed, survey
+from offroad_path.world.held_out import (
+    DEVELOPMENT_STREAM,
+    MIN_FRAMES,
+    RETIRED_STREAM,
+    choose_held_out_worlds,
+    held_out_seed,
+    stress_seed,
+    survey,
+)
 from offroad_path.world.record import sequence_seed
 from offroad_path.world.scene import build_world
 
@@ -59,7 +67,9 @@ def test_the_main_set_is_drawn_as_training_is_and_each_stress_set_shows_its_case
     main = [w for w in chosen if w.test_set == "main"]
     # the main set: the first candidates in seed order, until the blocks are there, whatever they show
     assert [w.index for w in main] == list(range(len(main))) and sum(w.blocks for w in main[:-1]) < 3 <= sum(w.blocks for w in main)
-    assert all(w.seed == held_out_seed(0, w.index, c.main_stream) and w.draw == "training" and w.name == f"test_{w.index:03d}" for w in main)
+    assert all(
+        w.seed == held_out_seed(0, w.index, c.main_stream) and w.draw == "training" and w.name == f"test_{w.index:03d}" for w in main
+    )
     retired = [w for w in chosen if w.retired]  # the retired main test set's worlds develop now, named apart
     assert retired and all(w.test_set == "development" and w.name == f"retired_{w.index:03d}" for w in retired)
     assert all(w.seed == held_out_seed(0, w.index, RETIRED_STREAM) for w in retired) and sum(w.blocks for w in retired) >= 2
@@ -106,12 +116,14 @@ def test_too_few_candidates_is_an_error_naming_the_set(compose_config):
         choose_held_out_worlds(world, c, master_seed=0, workers=1)
     c = compose_config(
         "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=50", "synthesize.test_worlds.development_blocks=0",
+        "synthesize.test_worlds.retired_blocks=0",
         "synthesize.test_worlds.stress_sets=[]",
     ).synthesize.test_worlds  # fmt: skip
     with pytest.raises(ValueError, match=r"test_worlds\.min_blocks: 1 candidate worlds hold fewer than 50 blocks; raise max_candidates"):
         choose_held_out_worlds(world, c, master_seed=0, workers=1)
     c = compose_config(
         "synthesize.test_worlds.max_candidates=1", "synthesize.test_worlds.min_blocks=1", "synthesize.test_worlds.development_blocks=0",
+        "synthesize.test_worlds.retired_blocks=0",
         "synthesize.test_worlds.stress_sets=[shadow_water]", "synthesize.test_worlds.per_stress=2",
     ).synthesize.test_worlds  # fmt: skip
     with pytest.raises(ValueError, match=r"give stress set shadow_water [01] of 2 worlds; raise max_candidates or lower per_stress"):

@@ -12,6 +12,7 @@ import hashlib
 import os
 import pickle
 import re
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,8 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     # is not a checkpoint, and must not be reported as one whose objects the safe loader refused.
     if not (head.startswith(b"PK\x03\x04") or head.startswith(b"\x80")):
         raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (neither a zip archive nor a pickle: it starts {head!r})")
+    if head.startswith(b"PK\x03\x04"):
+        check_archive(path)
     try:
         saved = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:  # what weights_only raises on anything but tensors and plain values
@@ -51,6 +54,18 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         if torch.is_tensor(tensor) and tensor.is_floating_point() and not torch.isfinite(tensor).all():
             raise CheckpointError(f"{path}: weight {name} holds NaN or infinite values: a diverged run, not a model")
     return saved
+
+
+def check_archive(path: Path) -> None:
+    """The zip container's own CRC of every member: a checkpoint with flipped bytes loads as finite,
+    wrong weights otherwise. CheckpointError naming the file and the damaged member."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            damaged = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint (a damaged zip archive: {_first_sentence(e)})") from e
+    if damaged is not None:
+        raise CheckpointError(f"{path}: damaged, its member {damaged} fails the archive's CRC check (a corrupted copy?)")
 
 
 def _first_sentence(error: Exception) -> str:
