@@ -406,3 +406,22 @@ def test_evaluate_names_a_label_run_that_is_not_the_splits(compose_config, train
                          f"evaluate.out_dir={tmp_path / 'eval'}", f"evaluate.metrics_path={tmp_path / 'e.json'}",
                          f"evaluate.plots_dir={tmp_path / 'plots'}", "mlflow.enabled=false", "evaluate.temporal.enabled=false")  # fmt: skip
     refused(evaluate, cfg, capsys, tmp_path, other, "holds no sequence drive of the test manifest")
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [("render.device=bogus", "render.device"), ("drive.device=bogus", "drive.device"), ("drive.device=''", "drive.device"),
+     ("drive.device=3", "drive.device"), ("render.device=cuda:99", "render.device"), ("trainer.accelerator=tpu", "trainer.accelerator")],
+)  # fmt: skip
+def test_a_device_torch_cannot_parse_or_this_machine_lacks_is_refused_before_any_work(override, key):
+    """Not 12-118 s in with a torch traceback: one line naming the key and what the machine has."""
+    import torch
+
+    with pytest.raises(ConfigValueError, match=rf"^{key.replace('.', '[.]')}=.*: must be auto or .* this machine has: cpu") as found:
+        validate_config(load_config(override))
+    assert len(str(found.value).splitlines()) == 1
+    if not torch.cuda.is_available():  # a GPU this machine lacks, named as what it has
+        for missing in ("render.device=cuda", "drive.device=cuda", "trainer.accelerator=gpu"):
+            with pytest.raises(ConfigValueError, match=r"this machine has: cpu"):
+                validate_config(load_config(missing))
+    validate_config(load_config("render.device=cpu", "drive.device=auto", "trainer.accelerator=auto"))

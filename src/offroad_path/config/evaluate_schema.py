@@ -8,7 +8,7 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import IMAGE_SIZE, PRETRAININGS, _model_names
 from offroad_path.config.world_schema import VehicleConfig
-from offroad_path.utils.rules import at_least, between, distinct, each, one_of, positive, setting
+from offroad_path.utils.rules import at_least, between, distinct, each, one_of, positive, setting, torch_device
 
 
 @dataclass
@@ -129,4 +129,4 @@ class DriveConfig:
     other_vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     bootstrap: BootstrapConfig = field(default_factory=BootstrapConfig)
     workers: int = setting(at_least(0))
-    device: str = MISSING  # the policies' networks: auto (the GPU where there is one), cpu, cuda, ...
+    device: str = setting(torch_device())  # the policies' networks: auto (the GPU where there is one), cpu, cuda, ...

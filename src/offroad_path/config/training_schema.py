@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from omegaconf import MISSING
 
 from offroad_path.config.common import IMAGE_SIZE, MAX_STEPS, PRETRAININGS, _model_names
-from offroad_path.utils.rules import at_least, between, each, one_of, positive, setting
+from offroad_path.utils.rules import accelerator, at_least, between, each, one_of, positive, setting
 
 UNKNOWN_DEPTH = ("keep", "drop")  # postprocess.unknown_depth: inference.path_filter
 BALANCES = ("none", "oversample", "weighted")  # steering.balance: steering.balance
@@ -73,7 +73,7 @@ class TrainerConfig:
     _target_: str = MISSING
     max_epochs: int = setting(at_least(1))
     max_time: str | None = MISSING  # "DD:HH:MM:SS": stop after this wall time (null: no limit)
-    accelerator: str = MISSING
+    accelerator: str = setting(accelerator())  # Lightning's: auto, cpu, gpu, ... (one this machine has)
     devices: str = MISSING
     strategy: str = MISSING  # ddp across GPUs (trainer=ddp)
     num_nodes: int = MISSING

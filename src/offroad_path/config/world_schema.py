@@ -11,7 +11,7 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import FINITE, IMAGE_SIZE, PITCH
 from offroad_path.looks import axis_values
-from offroad_path.utils.rules import ConfigValueError, Rule, at_least, between, distinct, each, one_of, positive, setting
+from offroad_path.utils.rules import ConfigValueError, Rule, at_least, between, distinct, each, one_of, positive, setting, torch_device
 
 # The report's condition groups, which synthesize.test_worlds.stress_sets name: world.groups.GROUPS's
 # keys, in order (tests/config/test_config.py checks that they agree).
@@ -156,7 +156,7 @@ class TestWorldsConfig:
 @dataclass
 class RenderConfig:
     backend: str = setting(one_of(("numpy", "torch")))
-    device: str = MISSING  # torch's device name, or auto
+    device: str = setting(torch_device())  # torch's device name, or auto
     views_per_batch: int = setting(at_least(2))
 
 

@@ -16,8 +16,8 @@ from omegaconf import DictConfig
 
 from offroad_path.data.loading import load_labels, load_maps
 from offroad_path.data.manifest import Sample, read_manifest, read_predictions_manifest
-from offroad_path.evaluate.design import design_record
 from offroad_path.errors import InputError
+from offroad_path.evaluate.design import design_record
 from offroad_path.evaluate.figures import save_png
 from offroad_path.evaluate.pixel_scores import counts, mean_path, precision_recall_curve
 from offroad_path.report.tables import csv_text

@@ -20,7 +20,7 @@ class ConfigValueError(ValueError):
 @dataclasses.dataclass(frozen=True)
 class Rule:
     test: Callable[[Any], bool]
-    says: str
+    says: str | Callable[[], str]  # a callable when the message depends on the machine (its devices)
 
 
 # Losses, weights and rates are computed in float32: a setting must be a number there too (1e39 is
@@ -72,6 +72,57 @@ def one_of(choices: Iterable[str] | Callable[[], Iterable[str]]) -> dict:
     return {"rule": Rule(lambda v: v in valid(), "")} | {"choices": valid}
 
 
+def machine_devices() -> list[str]:
+    """The torch devices this machine has: cpu, and cuda, cuda:0 ... and mps where there are."""
+    import torch
+
+    found = ["cpu"]
+    if torch.cuda.is_available():
+        found += ["cuda", *(f"cuda:{i}" for i in range(torch.cuda.device_count()))]
+    if torch.backends.mps.is_available():
+        found.append("mps")
+    return found
+
+
+def has_device(name: str) -> bool:
+    """Whether torch can parse `name` as a device and this machine has it."""
+    if name == "cpu":
+        return True  # without importing torch: the usual value is checked at no cost
+    import torch
+
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError, ValueError):
+        return False
+    if device.type == "cuda":
+        return torch.cuda.is_available() and (device.index is None or device.index < torch.cuda.device_count())
+    if device.type == "mps":
+        return torch.backends.mps.is_available()
+    return device.type == "cpu"
+
+
+def torch_device() -> dict:
+    """`auto` (the GPU where there is one, else the CPU) or a torch device this machine has."""
+
+    def says() -> str:
+        return f"must be auto or a torch device this machine has: {', '.join(machine_devices())}"
+
+    return {"rule": Rule(lambda v: isinstance(v, str) and (v == "auto" or has_device(v)), says)}
+
+
+ACCELERATORS = {"cpu": "cpu", "gpu": "cuda", "cuda": "cuda", "mps": "mps"}  # Lightning's accelerator -> the torch device it needs
+
+
+def accelerator() -> dict:
+    """Lightning's `auto` or an accelerator whose device this machine has."""
+
+    def says() -> str:
+        have = [name for name, device in ACCELERATORS.items() if has_device(device)]
+        return f"must be auto or an accelerator this machine has: {', '.join(have)} (its devices: {', '.join(machine_devices())})"
+
+    return {"rule": Rule(lambda v: v == "auto" or (v in ACCELERATORS and has_device(ACCELERATORS[v])), says)}
+
+
 def numbers(count: int) -> dict:
     """A list of exactly `count` finite numbers."""
     return {"rule": Rule(lambda v: len(v) == count and all(_number(x) for x in v), f"must be a list of {count} finite numbers")}
@@ -120,7 +171,7 @@ def validate(cfg: DictConfig, schema: type, prefix: str = "", only: Iterable[str
             continue
         check = f.metadata.get("rule")
         if check is not None and value is not None and not check.test(value):
-            says = check.says or f"must be one of: {', '.join(f.metadata['choices']())}"
+            says = (check.says() if callable(check.says) else check.says) or f"must be one of: {', '.join(f.metadata['choices']())}"
             if _float64_only(value):
                 says += " in float32, the precision it is used in"
             if check.says and "choices" in f.metadata:  # a list of choices with a rule of its own (distinct)
