@@ -22,6 +22,7 @@ import argparse
 import time
 
 import numpy as np
+from common import positive_int
 
 from offroad_path.statistics.bootstrap import Draws, Resampling, paired_draws, score_draws
 from offroad_path.statistics.scores import iou
@@ -47,12 +48,6 @@ def test_set(
     fp, fn = (size * rng.uniform(0.1, 0.2, len(world_of)) for _ in range(2))
     counts = [np.stack(np.broadcast_arrays(size * np.clip(r, 0.05, 0.95), fp, np.zeros_like(r), fn), axis=-1) for r in rates]
     return (np.stack(counts) if paired else counts[0]), list(world_of)
-
-
-def positive_int(text: str) -> int:
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of at least 1")
-    return int(text)
 
 
 def main() -> None:

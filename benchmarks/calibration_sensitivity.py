@@ -17,6 +17,7 @@ import dataclasses
 
 import cv2
 import numpy as np
+from common import positive_float, positive_int
 from omegaconf import OmegaConf
 
 from offroad_path.config import load_config
@@ -43,8 +44,8 @@ def drift_pct(sequence: Sequence, cfg: OdometryConfig) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequences", nargs="+", help="sequence folders with true poses")
-    parser.add_argument("--draws", type=int, default=20)
-    parser.add_argument("--scale", type=float, default=1e-7, help="largest relative change of each calibration value")
+    parser.add_argument("--draws", type=positive_int, default=20)
+    parser.add_argument("--scale", type=positive_float, default=1e-7, help="largest relative change of each calibration value")
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="config overrides (label.odometry...)")
     args = parser.parse_args()
     cv2.setNumThreads(1)

@@ -18,6 +18,7 @@ a benchmark imports it as `common`; pytest finds it through its pythonpath (pypr
 
 from __future__ import annotations
 
+import argparse
 import math
 import statistics
 import time
@@ -285,3 +286,24 @@ def development_problem(data: Path) -> str | None:
 def repeated(values: list[int]) -> list[int]:
     """The values listed more than once, in order."""
     return sorted({v for v in values if values.count(v) > 1})
+
+
+# -- Arguments ------------------------------------------------------------------------------------
+
+
+def positive_int(text: str) -> int:
+    """A count of at least 1 (argparse type: a count of 0 would run the work and then fail on nothing)."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of at least 1")
+    return int(text)
+
+
+def positive_float(text: str) -> float:
+    """A finite number above 0 (a negative scale is no range to draw from)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number above 0")
+    return value

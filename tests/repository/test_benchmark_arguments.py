@@ -64,3 +64,13 @@ def test_help_prints_and_writes_nothing(script, tmp_path):
     run = command(str(ROOT / "benchmarks" / script), "--help", cwd=tmp_path)
     assert run.returncode == 0 and "usage:" in run.stdout, run.stderr[-800:]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("arguments", "says"),
+    [(["--draws", "0"], "--draws: '0' is not a whole number of at least 1"), (["--scale", "-1"], "--scale: '-1' is not a number above 0")],
+)
+def test_the_calibration_benchmark_refuses_no_draws_or_a_negative_scale_before_the_odometry(arguments, says, tmp_path):
+    """Not after minutes of odometry with a ValueError of min() or of the random draw."""
+    run = command(str(ROOT / "benchmarks" / "calibration_sensitivity.py"), str(tmp_path), *arguments)
+    assert run.returncode == 2 and says in run.stderr.strip().splitlines()[-1] and run.stdout == ""
