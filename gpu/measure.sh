@@ -26,6 +26,10 @@ while [ $# -gt 0 ]; do
   esac
 done
 [ -n "$OUT_DIR" ] || { echo "error: --out: required (the folder the figures are copied into)" >&2; exit 2; }
+# Every argument checked before any work (a --limit timeout cannot take runs its benchmarks, then fails).
+[[ "$LIMIT" =~ ^[0-9]+$ && "$LIMIT" -gt 0 ]] || { echo "error: --limit: $LIMIT is not a whole number of seconds above 0" >&2; exit 2; }
+[[ "$JOBS" =~ ^[0-9]+$ && "$JOBS" -gt 0 ]] || { echo "error: --jobs: $JOBS is not a whole number above 0" >&2; exit 2; }
+[ "$WHEELHOUSE" = none ] || [ -d "$WHEELHOUSE" ] || { echo "error: --wheelhouse: $WHEELHOUSE is no folder (or none)" >&2; exit 2; }
 PIPELINE=gpu/dvc.yaml RENDER=(--set render.backend=torch) TRAINING=()
 if [ "$REHEARSE" = 1 ]; then
   PIPELINE=rehearsal/dvc.yaml
@@ -44,10 +48,15 @@ export PYTHONUNBUFFERED=1
 python3 benchmarks/render_speed.py "${RENDER[@]}" 2>&1 | tee "$OUT_DIR/render_speed.txt"
 python3 benchmarks/gpu_training.py "${TRAINING[@]}" --json "$OUT_DIR/gpu_training.json" 2>&1 | tee "$OUT_DIR/gpu_training.txt"
 LEFT=$((LIMIT - (SECONDS - START)))
-echo "the pipeline from nothing, for at most ${LEFT} s"
 status=0
-timeout "$LEFT" bash gpu/repro.sh --wheelhouse none --pipeline "$PIPELINE" --jobs "$JOBS" || status=$?
-echo "pipeline exit $status (124: stopped at the limit)"
+if [ "$LEFT" -gt 0 ]; then
+  echo "the pipeline from nothing, for at most ${LEFT} s"
+  timeout "$LEFT" bash gpu/repro.sh --wheelhouse none --pipeline "$PIPELINE" --jobs "$JOBS" || status=$?
+  echo "pipeline exit $status (124: stopped at the limit)"
+else
+  echo "error: the benchmarks took all of --limit $LIMIT s: the pipeline never started" >&2
+  status=125
+fi
 if [ "$status" = 0 ]; then  # a complete run: its results page, to commit beside the laptop's
   python3 -m offroad_path.report.readme --pipeline "$ROOT" --results "$ROOT/results-$ROOT.md"
 fi
@@ -55,3 +64,5 @@ fi
 # utilisation, the log and, after a complete run, the results page.
 tar czf "$OUT_DIR/run.tgz" --ignore-failed-read "$ROOT/dvc.lock" "$ROOT/metrics" "$ROOT/pipeline_time.log" "$ROOT/results-$ROOT.md" 2>/dev/null || true
 tar tzf "$OUT_DIR/run.tgz"
+# 124 (stopped at the limit) is what a measuring run expects; any other failure, or no pipeline at all, is not.
+if [ "$status" != 0 ] && [ "$status" != 124 ]; then exit 1; fi

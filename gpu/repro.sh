@@ -28,7 +28,11 @@ while [ $# -gt 0 ]; do
   esac
 done
 ROOT=$(dirname "$PIPELINE")
+# Every argument checked before anything is made: a refused run leaves nothing that refuses the corrected one.
 [ -f "$PIPELINE" ] || { echo "error: $PIPELINE: no such pipeline" >&2; exit 2; }
+[ "$(basename "$PIPELINE")" = dvc.yaml ] || { echo "error: --pipeline: $PIPELINE is not a pipeline file (a dvc.yaml)" >&2; exit 2; }
+[[ "$JOBS" =~ ^[0-9]+$ && "$JOBS" -gt 0 ]] || { echo "error: --jobs: $JOBS is not a whole number above 0" >&2; exit 2; }
+[ "$WHEELHOUSE" = none ] || [ -d "$WHEELHOUSE" ] || { echo "error: --wheelhouse: $WHEELHOUSE is no folder (or none)" >&2; exit 2; }
 for made in "$ROOT/data" "$ROOT/metrics" "$ROOT/dvc.lock"; do
   if [ -e "$made" ]; then echo "error: $made: exists; a run from nothing starts without it (move it away)" >&2; exit 2; fi
 done
@@ -44,6 +48,12 @@ if command -v nvidia-smi >/dev/null; then
   nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv,noheader,nounits -l 1 >"$ROOT/metrics/gpu_utilisation.csv" &
   SAMPLER=$!
 fi
+stopped() {  # Ctrl-C or a kill: say so, stop the sampler, keep what the stages finished
+  [ -n "$SAMPLER" ] && kill "$SAMPLER" 2>/dev/null
+  echo "stopped: the stages finished so far are in $ROOT/metrics/pipeline_time.json (complete: false)" >&2
+  exit 130
+}
+trap stopped INT TERM
 status=0
 python3 tools/parallel_repro.py "$PIPELINE" --jobs "$JOBS" --log "$ROOT/pipeline_time.log" --json "$ROOT/metrics/pipeline_time.json" || status=$?
 [ -n "$SAMPLER" ] && kill "$SAMPLER"
