@@ -97,7 +97,8 @@ def test_a_corrupt_shard_record_is_named(compose_config, labelled_drive, recordi
 @pytest.mark.parametrize(
     "override",
     ["world.slip.factors.grass=-2", "world.slip.factors.grass=nan", "world.slip.patch_m=1e-4", "drive.other_vehicle.wheelbase_m=0",
-     "world.vehicle.max_steering_deg=0", "predict.ros.camera_pitch_deg=nan", "ingest.footprint.camera_height_m=-1"],
+     "world.vehicle.max_steering_deg=0", "predict.ros.camera_pitch_deg=nan", "ingest.footprint.camera_height_m=-1",
+     "synthesize.test_worlds.horizon_m=-4"],
 )  # fmt: skip
 def test_values_without_meaning_are_refused_naming_the_key(override):
     key = override.split("=")[0].rsplit(".", 1)[0] if "factors" in override else override.split("=")[0]
