@@ -29,8 +29,9 @@ if WORKERS > 1:
 
 # A test not marked slow runs its body in under this many seconds on the 2-core machine the suite
 # is sized for (setup not counted: the session's fixtures are made by whichever test needs them
-# first); one over it fails the run, named, so the everyday tier (`pytest -m "not slow"`) stays
-# minutes. OFFROAD_NOT_SLOW_BUDGET_S raises it on a slower machine.
+# first); one over it is listed at the end of the run, named, so the everyday tier (`pytest -m "not
+# slow"`) stays minutes. It never fails the run: a slower or busier machine is no failing test
+# (speed is measured in benchmarks). OFFROAD_NOT_SLOW_BUDGET_S sets another budget.
 NOT_SLOW_BUDGET_S = float(os.environ.get("OFFROAD_NOT_SLOW_BUDGET_S", "5"))
 over_budget: list[tuple[str, float]] = []
 
@@ -45,12 +46,6 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         terminalreporter.section(f"not marked slow, yet over {NOT_SLOW_BUDGET_S:g} s (mark them slow or make them faster)")
         for nodeid, seconds in sorted(over_budget, key=lambda entry: -entry[1]):
             terminalreporter.write_line(f"{seconds:6.2f}s {nodeid}")
-
-
-@pytest.hookimpl(trylast=True)
-def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    if over_budget and exitstatus == pytest.ExitCode.OK and not hasattr(session.config, "workerinput"):
-        session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -1,5 +1,6 @@
 """The suite's own rule (tests/conftest.py): a test not marked slow whose body runs over the budget
-fails the run and is named; a slow one may take as long as it needs."""
+is named at the end of the run, which still passes (a slower machine is no failure); a slow one may
+take as long as it needs."""
 
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ def test_marked_slow():
 
 
 @pytest.mark.slow(seconds=5)
-def test_a_test_not_marked_slow_over_the_budget_fails_the_run(tmp_path):
+def test_a_test_not_marked_slow_over_the_budget_is_named_and_the_run_passes(tmp_path):
     for name in ("conftest.py", "helpers.py"):
         shutil.copy(ROOT / "tests" / name, tmp_path / name)
     (tmp_path / "test_probe.py").write_text(PROBE)
@@ -39,6 +40,6 @@ def test_a_test_not_marked_slow_over_the_budget_fails_the_run(tmp_path):
     command = [sys.executable, "-m", "pytest", "-n0", "-p", "no:cacheprovider", "-o", "addopts=", "--rootdir", tmp_path, tmp_path]
     env = {**os.environ, "OFFROAD_NOT_SLOW_BUDGET_S": "0.3"}
     run = subprocess.run(list(map(str, command)), capture_output=True, text=True, env=env, cwd=tmp_path)
-    assert run.returncode == 1 and "3 passed" in run.stdout, run.stdout[-2000:]
+    assert run.returncode == 0 and "3 passed" in run.stdout, run.stdout[-2000:]
     named = run.stdout.split("not marked slow, yet over 0.3 s")[1].split("\n=")[0]
     assert "test_probe.py::test_dawdles" in named and "test_marked_slow" not in named and "test_quick" not in named
