@@ -24,7 +24,7 @@ def config_names(group: str) -> Callable[[], list[str]]:
     return lambda: sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
 
 
-_model_names = config_names("model")
+model_names = config_names("model")
 
 
 PRETRAININGS = config_names("pretraining")

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from omegaconf import MISSING
 
-from offroad_path.config.common import IMAGE_SIZE, PRETRAININGS, _model_names
+from offroad_path.config.common import IMAGE_SIZE, PRETRAININGS, model_names
 from offroad_path.config.world_schema import VehicleConfig
 from offroad_path.utils.rules import at_least, between, distinct, each, one_of, positive, setting, torch_device
 
@@ -70,7 +70,7 @@ class MainTestSetConfig:
 
 @dataclass
 class EvaluateConfig:
-    architectures: list[str] = setting(each(one_of(_model_names)))
+    architectures: list[str] = setting(each(one_of(model_names)))
     pretrainings: list[str] = setting(each(one_of(PRETRAININGS)))
     seeds: list[int] = setting(distinct(at_least(0), nonempty=True))  # training seeds of every run: data/runs/<run>/seed<k>
     main_test_set: MainTestSetConfig = field(default_factory=MainTestSetConfig)

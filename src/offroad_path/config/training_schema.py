@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from omegaconf import MISSING
 
-from offroad_path.config.common import IMAGE_SIZE, MAX_STEPS, PRETRAININGS, _model_names
+from offroad_path.config.common import IMAGE_SIZE, MAX_STEPS, PRETRAININGS, model_names
 from offroad_path.utils.rules import accelerator, at_least, between, each, one_of, positive, setting
 
 UNKNOWN_DEPTH = ("keep", "drop")  # postprocess.unknown_depth: inference.path_filter
@@ -40,7 +40,7 @@ class PaperTrainingConfig:
 @dataclass
 class ModelConfig:
     _target_: str = MISSING  # the task's builder (training.task.segmentation_task); the keys below are its arguments
-    name: str = setting(one_of(_model_names))
+    name: str = setting(one_of(model_names))
     width: float = setting(positive())  # channel multiplier: 1 is the original network
     lr: float = setting(positive())
     optimizer: str = setting(one_of(("sgd", "adamw")))  # sgd: the paper's (with momentum); adamw: the laptop recipe's

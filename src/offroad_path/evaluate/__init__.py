@@ -122,17 +122,17 @@ def refuse_unmakeable(name: str, compare: str) -> None:
     """A primary's comparison that no grid of the registered networks and pretrainings makes, in
     either order of evaluate.architectures (a misspelt run or baseline): InputError naming its key,
     instead of a primary not measured."""
-    from offroad_path.config.common import PRETRAININGS, _model_names
+    from offroad_path.config.common import PRETRAININGS, model_names
     from offroad_path.evaluate.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
 
-    grid = [f"{model}-{pretraining}" for model in _model_names() for pretraining in PRETRAININGS()]
+    grid = [f"{model}-{pretraining}" for model in model_names() for pretraining in PRETRAININGS()]
     pairs = comparisons(grid) + comparisons(grid[::-1])  # evaluate.architectures' order sets a pair's
     makeable = {f"uncertainty/{key}" for key, *_ in pairs} | {f"uncertainty/{EVERY_SCRATCH_VS_PRIOR}"}
     makeable |= {f"steering_from_paths/{run}_vs_pilotnet" for run in grid}
     if compare not in makeable:
         raise InputError(
             f"evaluate.conclusions.primaries.{name}.compare",
-            f"{compare!r} is a comparison no run makes: <model>-<pretraining> with a model of {', '.join(_model_names())} "
+            f"{compare!r} is a comparison no run makes: <model>-<pretraining> with a model of {', '.join(model_names())} "
             f"and a pretraining of {', '.join(PRETRAININGS())} (the report's metrics keys name the comparisons)",
         )
 

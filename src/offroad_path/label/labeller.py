@@ -139,7 +139,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
 def label_segment(seq: Sequence, report: SegmentReport, polygons: list[np.ndarray], cfg, out_dir: Path) -> None:
     """Write the segment's label (and f0's disparity, with stereo) into out_dir; fill the report's
     label pixels, or drop it when the footprint falls outside the image. One camera: no disparity,
-    no occlusion (label.py says so)."""
+    no occlusion (the label stage's log says so once)."""
     f0, occlusion_cfg = report.f0, cfg.occlusion
     if seq.mono:  # decoded, as the stereo odometry decodes every image: a broken one is named now, not at training
         seq.load_left(f0)
