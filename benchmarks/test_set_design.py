@@ -121,8 +121,9 @@ def from_seed_runs(files: list[Path], block_m: float, labels_dir: Path) -> dict[
     return out
 
 
-def from_retired(evaluation: dict) -> dict[str, dict[str, float]]:
-    """A comparison's whole spread in the retired run's interval (drawn with t(n - 1) / z), as the worlds'."""
+def from_retired(evaluation: dict, seed_sds: dict[str, float]) -> dict[str, dict[str, float]]:
+    """A comparison's whole spread in the retired run's interval (drawn with t(n - 1) / z), as the
+    worlds', but for an assumed per-seed sd (seed_sds: primary -> sd), whose share it then leaves."""
     worlds = evaluation["uncertainty"]["test_set"]["worlds"]
     widen = t.ppf(0.975, worlds - 1) / norm.ppf(0.975)
     out = {}
@@ -131,11 +132,12 @@ def from_retired(evaluation: dict) -> dict[str, dict[str, float]]:
         row = evaluation[section][key]
         se = (row["high"] - row["low"]) / 2 / (norm.ppf(0.975) * widen)
         estimate = next(v for k, v in row.items() if k.endswith("difference"))
+        seed = seed_sds.get(primary, 0.0) ** 2
         out[primary] = {
             "estimate": estimate,
-            "world": worlds * se**2,
+            "world": max(worlds * (se**2 - seed / evaluation["uncertainty"]["test_set"]["seeds"]), 0.0),
             "block": 0.0,
-            "seed": 0.0,
+            "seed": seed,
             "world_x_seed": 0.0,
             "worlds": worlds,
             "seeds": 0,
@@ -175,15 +177,19 @@ def main() -> None:
     parser.add_argument("--family", type=int, default=3, help="Holm's family: the strictest level is alpha / family")
     parser.add_argument("--alpha", type=float, default=0.05)
     parser.add_argument("--effect", type=float, default=0.02, help="the planning effect (IoU; normalised angle for the open loop)")
+    parser.add_argument("--assume-seed-sd", nargs="*", default=[], metavar="PRIMARY=SD",
+                        help="an assumed per-seed sd of a primary the seed runs do not measure (the open loop)")  # fmt: skip
     args = parser.parse_args()
     cfg = load_config()
     retired = json.loads(args.retired.read_text())
-    found = from_retired(retired) | from_seed_runs(args.spread, cfg.split.block_m, Path(cfg.split.labels_dir))
+    assumed = {name: float(sd) for name, sd in (item.split("=") for item in args.assume_seed_sd)}
+    found = from_retired(retired, assumed) | from_seed_runs(args.spread, cfg.split.block_m, Path(cfg.split.labels_dir))
     print("| primary | estimate | world sd | block sd | seed sd | world x seed sd | measured on |\n" + "| --- " * 7 + "|")
     for name, c in found.items():
         where = (
             f"{c['worlds']} development worlds, {c['seeds']} seeds" if c["seeds"] else f"the retired run's interval ({c['worlds']} worlds)"
         )
+        where += f"; seed sd assumed {assumed[name]:g}" if name in assumed else ""
         sds = " | ".join(f"{math.sqrt(c[k]):.4f}" for k in ("world", "block", "seed", "world_x_seed"))
         print(f"| {name} | {c['estimate']:+.4f} | {sds} | {where} |")
     level = 1 - args.alpha / args.family

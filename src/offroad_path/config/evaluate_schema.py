@@ -57,7 +57,7 @@ class ConclusionsConfig:
     alpha: float = setting(between(0, 1, low_open=True, high_open=True))  # family-wise, two-sided
     power: float = setting(between(0, 1, low_open=True, high_open=True))  # the drive's target power per primary
     primaries: dict[str, PrimaryConfig] = MISSING
-    left_out: dict[str, str] = MISSING  # a question the design cannot power: why ({}: none)
+    left_out: dict[str, str] = MISSING  # a question the design cannot power: why ({}: none; one a preset adds to primaries is asked)
 
 
 @dataclass

@@ -139,7 +139,8 @@ def primaries_markdown(conclusions, measured: dict[str, dict]) -> str:
         "exploratory.\n",
         grid(PRIMARIES_HEADER, [_primary_row(v, measured.get(v.name, {})) for v in found]),
     ]
-    if left_out := conclusions.get("left_out"):
+    # a preset that adds a left-out question back to its family (experiment=gpu) asks it there
+    if left_out := {name: why for name, why in (conclusions.get("left_out") or {}).items() if name not in conclusions.primaries}:
         lines.append("\nLeft out of the family, as the design cannot power them (exploratory here): "
                      + "; ".join(f"{name}: {why}" for name, why in left_out.items()) + ".\n")  # fmt: skip
     return "\n".join(lines) + "\n"
