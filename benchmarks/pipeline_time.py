@@ -2,13 +2,14 @@
 caching of a stage's outputs count in that stage), idle or beside another CPU-heavy process.
 
     python benchmarks/pipeline_time.py [--beside-load] [--log OUT] [--json metrics/pipeline_time.json] [-- <dvc repro arguments>]
-    python benchmarks/pipeline_time.py --parse LOG [--mlflow-db mlflow.db] [--json metrics/pipeline_time.json]
+    python benchmarks/pipeline_time.py --parse LOG [LOG ...] [--mlflow-db mlflow.db] [--json metrics/pipeline_time.json]
 
 Run in a checkout (a fresh clone for "from nothing": no data/, no .dvc/cache). Every line of
 `dvc repro`'s output is stamped with the epoch second it came (written to --log), and the table
 groups a matrix stage's runs (train_scratch@unet-0 ...) under its name. `--beside-load` runs a
 second process that multiplies matrices on torch's default threads all along, as another training
-job would. `--parse` prints the table of a log written before. With the run's MLflow store
+job would. `--parse` prints the table of a log written before (of several, a repro stopped and
+resumed: stitched end to start, the time between them not counted). With the run's MLflow store
 (`--mlflow-db`, the default mlflow.db when it exists), each stage that logs a run is split into its
 start-up (the process's imports, Hydra, data set-up and MLflow's store, until its run starts), the
 run itself, and its end (the run's end to the next stage's start: process exit, DVC hashing and
@@ -121,11 +122,17 @@ def write_json(path: Path, lines: list[tuple[float, str]]) -> None:
     path.write_text(json.dumps(timed, indent=2) + "\n")
 
 
-def read_log(path: Path) -> list[tuple[float, str]]:
-    lines = []
-    for line in path.read_text().splitlines():
-        stamp, _, text = line.partition(" ")
-        lines.append((float(stamp), text))
+def read_log(*paths: Path) -> list[tuple[float, str]]:
+    """A --log's stamped lines; several logs (one repro stopped and resumed) stitched end to start:
+    each later log's clock shifted to begin where the one before ended, the time between not counted."""
+    lines: list[tuple[float, str]] = []
+    for path in paths:
+        found = []
+        for line in path.read_text().splitlines():
+            stamp, _, text = line.partition(" ")
+            found.append((float(stamp), text))
+        shift = lines[-1][0] - found[0][0] if lines and found else 0.0
+        lines += [(when + shift, text) for when, text in found]
     return lines
 
 
@@ -133,13 +140,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--beside-load", action="store_true", help="run a torch matrix-multiplying process beside it")
     parser.add_argument("--log", type=Path, default=Path("pipeline_time.log"))
-    parser.add_argument("--parse", type=Path, help="only print the table of an earlier --log")
+    parser.add_argument("--parse", type=Path, nargs="+", help="only print the table of earlier --log files (several: stitched)")
     parser.add_argument("--mlflow-db", type=Path, default=Path("mlflow.db"), help="the run's MLflow store, for start-up and end times")
     parser.add_argument("--json", type=Path, help="also write the machine, total_s and each stage's seconds here")
     parser.add_argument("dvc_args", nargs="*", help="arguments of dvc repro, after --")
     args = parser.parse_args()
     if args.parse:
-        lines = read_log(args.parse)
+        lines = read_log(*args.parse)
         if args.json:
             write_json(args.json, lines)
         print(table(lines))
