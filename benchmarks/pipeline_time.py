@@ -114,9 +114,10 @@ def machine() -> str:
     return found
 
 
-def write_json(path: Path, lines: list[tuple[float, str]]) -> None:
-    """`{"machine", "total_s", "stages": {stage: seconds}}` of one repro, for the generated results."""
-    timed = {"machine": machine(), "total_s": round(lines[-1][0] - lines[0][0], 1)}
+def write_json(path: Path, lines: list[tuple[float, str]], sittings: int = 1) -> None:
+    """`{"machine", "total_s", "stages": {stage: seconds}}` of one repro, for the generated results;
+    `sittings` when its logs were stitched (a repro stopped and resumed)."""
+    timed = {"machine": machine(), "total_s": round(lines[-1][0] - lines[0][0], 1)} | ({"sittings": sittings} if sittings > 1 else {})
     timed["stages"] = {name: round(seconds, 1) for name, seconds in stage_seconds(lines)}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(timed, indent=2) + "\n")
@@ -148,7 +149,7 @@ def main() -> None:
     if args.parse:
         lines = read_log(*args.parse)
         if args.json:
-            write_json(args.json, lines)
+            write_json(args.json, lines, len(args.parse))
         print(table(lines))
         if args.mlflow_db.is_file():
             print("\n" + overheads(lines, args.mlflow_db))
