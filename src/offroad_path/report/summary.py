@@ -68,7 +68,9 @@ def results_markdown(  # noqa: PLR0913
         f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % hierarchical bootstrap ({resamples} "
         f"resamples): the {worlds} test worlds drawn with replacement, then the blocks within each drawn world, then the "
         "training seeds, every compared method on the same draw, each method's counts pooled over its seeds; each interval "
-        f"widened by Student's t and the bootstrap's small-sample bias for {worlds} worlds (docs/conclusions.md). They cover "
+        f"widened for the {worlds} worlds and {seeds} seeds it rests on (each level's small-sample bias and Student's t with their "
+        "Welch-Satterthwaite degrees of freedom, docs/conclusions.md): where the seeds' spread is large, two seeds give a wide "
+        "interval. They cover "
         "which test worlds and stretches of "
         "driving were tested; which seeds trained the networks only in part, since a few seeds show little of the seed-to-seed "
         "spread, and a rerun on another kind of CPU trains other bytes: a primary's smallest effect of interest lies above "
@@ -123,8 +125,10 @@ def _provenance(full: bool, pipeline: str) -> str:
 def _timing_sentence(timing: dict, pipeline: str = "") -> str:
     minutes, seconds = divmod(round(timing["total_s"]), 60)
     if not pipeline:
+        sittings = timing.get("sittings", 1)
+        resumed = f", in {sittings} sittings whose logs are stitched (the time between them not counted)" if sittings > 1 else ""
         return (
-            f"Time: the last `dvc repro` from nothing took {minutes} min {seconds} s on a {timing['machine']} "
+            f"Time: the last `dvc repro` from nothing took {minutes} min {seconds} s on a {timing['machine']}{resumed} "
             f"(`metrics/pipeline_time.json`, written by `python benchmarks/pipeline_time.py --json`, with every stage's seconds).\n"
         )
     # A scaled run's times come from tools/parallel_repro.py: each stage's start and end on the run's clock.
