@@ -195,7 +195,7 @@ def tiny_repo(repo: Path) -> Path:
     (repo / "conf" / "mlflow" / "default.yaml").write_text(
         "enabled: false\nexperiment: offroad-path\ntracking_uri: null\nlog_models: true\n"
     )
-    grid = repo / "conf" / "evaluate" / "default.yaml"  # one training seed: dvc.yaml's grid reads the list from this file
+    grid = repo / "conf" / "evaluate" / "design" / "laptop.yaml"  # one training seed: dvc.yaml's grid reads the list from this file
     text = grid.read_text()
     assert re.search(r"(?m)^seeds: \[0(, \d+)*\]", text)
     grid.write_text(re.sub(r"(?m)^seeds: \[0(, \d+)*\].*$", "seeds: [0]", text, count=1))

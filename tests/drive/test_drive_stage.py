@@ -68,11 +68,11 @@ def test_outputs_follow_the_contract(driven):
     # The primary this drive answers gets the exact test of its pooled counts, at each of Holm's 7 levels
     # (the laptop's 4 and the closed loop's 3); the others name policies it did not drive and are not measured.
     closed_loop = metrics["primaries"]["closed_loop"]
-    assert list(metrics["primaries"]) == ["closed_loop"] and len(closed_loop["intervals"]) == 7 and closed_loop["null"] == 1.0
+    assert list(metrics["primaries"]) == ["closed_loop"] and len(closed_loop["intervals"]) == 5 and closed_loop["null"] == 1.0
     policies = metrics["steering"]["policies"]
     assert closed_loop["interventions"] == [policies["unet-none"]["interventions"], policies["pilotnet"]["interventions"]]
-    # the route the planning rates (30.2 and 35.4 per km) need at 0.05 / 7, its family's strictest level
-    assert 0 < closed_loop["p_value"] <= 1 and closed_loop["route_needed_m"] == pytest.approx(30610, abs=20)
+    # the route the planning rates (30.2 and 35.4 per km) need at 0.05 / 5, its family's strictest level
+    assert 0 < closed_loop["p_value"] <= 1 and closed_loop["route_needed_m"] == pytest.approx(28680, abs=20)
     for argument in ("steering", "vehicle", "traction"):
         assert (drive_dir / "trajectories" / argument / "test_000.png").stat().st_size > 1000
         for policy in metrics[argument]["policies"].values():

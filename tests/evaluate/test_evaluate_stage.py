@@ -32,8 +32,9 @@ def scored(compose_config, split_dir, tmp_path_factory):
     for run, maps in made.items():
         write_run(compose_config, split_dir, root, run, 0, maps)
     write_pilotnet_predictions(samples, root / "steering" / "predictions.csv")
-    # the open loop joins the family as the GPU and full presets add it (conf/evaluate/primaries/open_loop.yaml)
-    open_loop = "+evaluate/primaries@evaluate.conclusions.primaries=open_loop"
+    # ranking, pretraining and the open loop join the family as the GPU and full presets add them
+    # (conf/evaluate/primaries/seed_spread.yaml and open_loop.yaml)
+    open_loop = "+evaluate/primaries@evaluate.conclusions.primaries=[seed_spread,open_loop]"
     rows = evaluate(stage_config(compose_config, split_dir, root, "evaluate.runs=[unet-none,fcn-none]", open_loop))
     return rows, labels.astype(bool), made, root
 
@@ -166,7 +167,7 @@ def test_a_stress_set_is_scored_on_its_own_and_kept_out_of_the_main_figures(comp
 def test_outputs_follow_the_contract(scored):
     *_, root = scored
     metrics = json.loads((root / "metrics.json").read_text())
-    assert set(metrics) == {"unet-none", "fcn-none", "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition"}
+    assert set(metrics) == {"design", "unet-none", "fcn-none", "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition"}
     assert metrics["unet-none"]["raw"]["iou"] == 1.0
     # by condition (the rendered drive's conditions.csv): the perfect maps score 1 in every group that has frames
     groups = metrics["by_condition"]

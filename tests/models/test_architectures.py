@@ -91,7 +91,7 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
     new = {"pretrain@tiny", "train_scratch@tiny-0", "train_pretrained@tiny-0", "postprocess@tiny-none-0", "postprocess@tiny-segmentation-0"}
     assert new <= stages, listed.stdout + listed.stderr
     grid = OmegaConf.load(repo / "conf" / "evaluate" / "default.yaml")
-    seeds, drive_seeds = grid.seeds, grid.drive_seeds
+    seeds, drive_seeds = OmegaConf.load(repo / "conf" / "evaluate" / "design" / "laptop.yaml").seeds, grid.drive_seeds
     assert {f"train_steering@{s}" for s in seeds} <= stages  # PilotNet per seed
     assert {f"{stage}@{s}" for stage in ("train_steering_slip", "train_steering_curvature") for s in drive_seeds} <= stages  # the drive's
     # synthesize, label, split, evaluate, drive; PilotNet per seed, the drive's two PilotNets per drive seed; per network a

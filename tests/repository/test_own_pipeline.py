@@ -35,7 +35,7 @@ def stage_config(compose_config, cmd: str):
 
 @pytest.mark.slow(seconds=4)
 def test_the_own_pipeline_writes_where_dvc_tracks_it(compose_config, own_stages):
-    seeds = yaml.safe_load((ROOT / "conf" / "evaluate" / "default.yaml").read_text())["seeds"]
+    seeds = yaml.safe_load((ROOT / "conf" / "evaluate" / "design" / "laptop.yaml").read_text())["seeds"]
     expected = ["label", "split", *(f"train@{k}" for k in range(len(seeds))), *(f"postprocess@{k}" for k in range(len(seeds))), "evaluate"]
     assert list(own_stages) == expected
     for name, (cmd, deps, outs, metrics) in own_stages.items():

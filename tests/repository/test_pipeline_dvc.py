@@ -115,7 +115,7 @@ def test_repro_runs_then_is_up_to_date_then_follows_a_config_edit(repo_copy, mon
     notice = metrics.pop("notice")  # the tour's preset: a smoke run says so, above its results too
     assert notice.startswith("Smoke run") and (repo_copy / "data" / "evaluation" / "results.md").read_text().startswith(f"> **{notice}**")
     assert set(metrics) == {f"{m}-{p}" for m in GRID for p in ("none", "segmentation")} | {
-        "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition", "stress_sets"}  # fmt: skip
+        "design", "uncertainty", "baselines", "steering_from_paths", "primaries", "by_condition", "stress_sets"}  # fmt: skip
     assert all(0 <= metrics[r][pp]["accuracy"] <= 1 for r in metrics if "raw" in metrics[r] for pp in ("raw", "postprocessed"))
     # path against steering: PilotNet (train_steering ran before evaluate), every run, the ceiling
     runs = {r for r in metrics if "raw" in metrics[r]}

@@ -160,15 +160,15 @@ def test_a_number_for_a_true_false_setting_is_refused(value):
 
 def test_true_false_and_null_are_taken():
     assert [load_config("model=fcn", f"model.batch_norm={v}").model.batch_norm for v in ("true", "False", "null")] == [True, False, None]
-    assert "ranking" not in load_config("~evaluate.conclusions.primaries.ranking").evaluate.conclusions.primaries  # a deletion has no value
+    assert "postprocessing" not in load_config("~evaluate.conclusions.primaries.postprocessing").evaluate.conclusions.primaries  # a deletion has no value
 
 
 def test_an_axis_override_merges_and_a_deleted_entry_is_gone():
     """What the config comment documents: `track={ruts:1}` keeps the other tracks' weights; `~` drops one."""
     merged = load_config("world.appearance.weights.track={ruts:1}").world.appearance.weights.track
     assert merged.ruts == 1 and merged.dirt == 1
-    primaries = load_config("~evaluate.conclusions.primaries.ranking").evaluate.conclusions.primaries
-    assert "ranking" not in primaries and "central_claim" in primaries
+    primaries = load_config("~evaluate.conclusions.primaries.postprocessing").evaluate.conclusions.primaries
+    assert "postprocessing" not in primaries and "central_claim" in primaries
 
 
 # -- Outputs inside inputs ----------------------------------------------------------------------------
@@ -212,7 +212,7 @@ def test_evaluate_names_a_seed_that_was_not_trained(compose_config, trained, spl
 
 def test_evaluate_names_a_misspelt_primary(compose_config, tmp_path, capsys):
     """A run name no grid has: refused before any work, instead of a primary left not measured."""
-    key = "evaluate.conclusions.primaries.ranking.compare"
+    key = "evaluate.conclusions.primaries.postprocessing.compare"
     cfg = compose_config(f"{key}=uncertainty/fcn-none_vs_unet-nnoe", f"evaluate.out_dir={tmp_path / 'eval'}",
                          f"evaluate.metrics_path={tmp_path / 'e.json'}", f"evaluate.plots_dir={tmp_path / 'plots'}",
                          "mlflow.enabled=false")  # fmt: skip

@@ -25,7 +25,7 @@ from offroad_path.world.scene import build_world
 
 def test_test_world_seeds_are_never_training_or_development_seeds():
     training = {sequence_seed(0, i) for i in range(1000)}
-    tests = {held_out_seed(0, i) for i in range(1000)}
+    tests = {held_out_seed(0, i, 5) for i in range(1000)}
     development = {held_out_seed(0, i, DEVELOPMENT_STREAM) for i in range(1000)}
     stress = {stress_seed(0, name, i) for name in ("dappled", "off_track") for i in range(1000)}
     assert not training & tests and not (training | tests) & stress and len(stress) == 2000

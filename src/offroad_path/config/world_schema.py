@@ -11,7 +11,7 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import FINITE, IMAGE_SIZE, PITCH
 from offroad_path.looks import axis_values
-from offroad_path.utils.rules import ConfigValueError, Rule, at_least, between, distinct, each, one_of, positive, setting, torch_device
+from offroad_path.utils.rules import ConfigValueError, Rule, at_least, between, distinct, each, one_of, positive, rule, setting, torch_device
 
 # The report's condition groups, which synthesize.test_worlds.stress_sets name: world.groups.GROUPS's
 # keys, in order (tests/config/test_config.py checks that they agree).
@@ -151,7 +151,7 @@ class TestWorldsConfig:
     block_m: float = setting(positive())
     # The last metres of a drive, which get no label (label.distance_m): checked here too, since the
     # synthesize stage reads it without the label group's rules.
-    horizon_m: float = setting(positive())
+    horizon_m: float = setting(rule(lambda v: v > 0, "must be a number > 0 (it is label.distance_m unless set apart)"))
     max_candidates: int = setting(at_least(1))
 
 
