@@ -160,7 +160,8 @@ def test_a_number_for_a_true_false_setting_is_refused(value):
 
 def test_true_false_and_null_are_taken():
     assert [load_config("model=fcn", f"model.batch_norm={v}").model.batch_norm for v in ("true", "False", "null")] == [True, False, None]
-    assert "postprocessing" not in load_config("~evaluate.conclusions.primaries.postprocessing").evaluate.conclusions.primaries  # a deletion has no value
+    deleted = load_config("~evaluate.conclusions.primaries.postprocessing").evaluate.conclusions.primaries  # a deletion has no value
+    assert "postprocessing" not in deleted
 
 
 def test_an_axis_override_merges_and_a_deleted_entry_is_gone():

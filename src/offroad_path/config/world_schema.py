@@ -11,7 +11,19 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import FINITE, IMAGE_SIZE, PITCH
 from offroad_path.looks import axis_values
-from offroad_path.utils.rules import ConfigValueError, Rule, at_least, between, distinct, each, one_of, positive, rule, setting, torch_device
+from offroad_path.utils.rules import (
+    ConfigValueError,
+    Rule,
+    at_least,
+    between,
+    distinct,
+    each,
+    one_of,
+    positive,
+    rule,
+    setting,
+    torch_device,
+)
 
 # The report's condition groups, which synthesize.test_worlds.stress_sets name: world.groups.GROUPS's
 # keys, in order (tests/config/test_config.py checks that they agree).
