@@ -4,8 +4,8 @@
 # trainings' images/s by batch size and with processes side by side (benchmarks/gpu_training.py),
 # then the preset's pipeline from nothing (gpu/repro.sh) for the rest of --limit seconds, stopped
 # there with the times of the stages it finished and the GPU's utilisation kept. Everything it
-# measured lands in --out: the benchmarks' output, and run.tgz with the run's lock, metrics, log and
-# (after a complete run) its results page, docs/results-<pipeline>.md's text.
+# measured lands in --out: the benchmarks' output, and run.tgz (gpu/repro.sh --archive) with the
+# run's lock, metrics, log and (after a complete run) its results page. Its figures go into gpu/sizing.yaml.
 #
 #   bash gpu/measure.sh [--wheelhouse .whl] [--limit 540] [--jobs 4] --out DIR
 #   bash gpu/measure.sh --wheelhouse none --rehearse --limit 300 --out /tmp/m   # the same steps on any machine, tiny
@@ -51,18 +51,12 @@ LEFT=$((LIMIT - (SECONDS - START)))
 status=0
 if [ "$LEFT" -gt 0 ]; then
   echo "the pipeline from nothing, for at most ${LEFT} s"
-  timeout "$LEFT" bash gpu/repro.sh --wheelhouse none --pipeline "$PIPELINE" --jobs "$JOBS" || status=$?
+  # its lock, metrics (stage times, the GPU's utilisation), log and, after a complete run, results page in one archive
+  bash gpu/repro.sh --wheelhouse none --pipeline "$PIPELINE" --jobs "$JOBS" --limit "$LEFT" --archive "$OUT_DIR/run.tgz" || status=$?
   echo "pipeline exit $status (124: stopped at the limit)"
 else
   echo "error: the benchmarks took all of --limit $LIMIT s: the pipeline never started" >&2
   status=125
 fi
-if [ "$status" = 0 ]; then  # a complete run: its results page, to commit beside the laptop's
-  python3 -m offroad_path.report.readme --pipeline "$ROOT" --results "$ROOT/results-$ROOT.md"
-fi
-# One archive (a GPU host returns few files): the lock, the metrics with the stage times and the GPU's
-# utilisation, the log and, after a complete run, the results page.
-tar czf "$OUT_DIR/run.tgz" --ignore-failed-read "$ROOT/dvc.lock" "$ROOT/metrics" "$ROOT/pipeline_time.log" "$ROOT/results-$ROOT.md" 2>/dev/null || true
-tar tzf "$OUT_DIR/run.tgz"
 # 124 (stopped at the limit) is what a measuring run expects; any other failure, or no pipeline at all, is not.
 if [ "$status" != 0 ] && [ "$status" != 124 ]; then exit 1; fi

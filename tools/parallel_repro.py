@@ -123,12 +123,14 @@ def run(pipeline: Path, jobs: int, log: Path | None, timing: Path | None = None)
     repo_root = Path(Repo.find_root(str(pipeline.resolve().parent)))
     logs = Path(tempfile.mkdtemp(prefix="parallel_repro."))
     scheduler = Scheduler(repo_root, str(pipeline.resolve().relative_to(repo_root)), jobs, logs, timing)
-    failed = scheduler.run()
-    if log is not None:
-        with log.open("w") as out:
-            for stage in scheduler.order:
-                if (logs / f"{stage}.log").is_file():
-                    out.writelines(f"[{stage}] {line}" for line in (logs / f"{stage}.log").read_text().splitlines(keepends=True))
+    try:
+        failed = scheduler.run()
+    finally:  # a run stopped part way (a time limit) keeps the output of the stages it ran too
+        if log is not None:
+            with log.open("w") as out:
+                for stage in scheduler.order:
+                    if (logs / f"{stage}.log").is_file():
+                        out.writelines(f"[{stage}] {line}" for line in (logs / f"{stage}.log").read_text().splitlines(keepends=True))
     if failed is not None:  # the logs stay for the user to read
         tail = (logs / f"{failed}.log").read_text().splitlines()[-20:]
         print(f"error: stage {failed} failed (its log: {logs / f'{failed}.log'}):\n" + "\n".join(tail), file=sys.stderr)

@@ -22,6 +22,9 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 # folder: its preset (conf/experiment/<preset>.yaml), then the presets that one's defaults list
 PIPELINES = {"gpu": ("gpu",), "tour": ("tour",), "rehearsal": ("rehearsal", "gpu", "tour")}
+# folder: its pre-registered design (conf/evaluate/design/<design>.yaml), where it is not the laptop's
+DESIGNS = {"gpu": "gpu", "rehearsal": "gpu"}
+LAPTOP_DESIGN = "conf/evaluate/design/laptop.yaml"
 OUTPUT = re.compile(r"(^|[\s=])((?:data|metrics)/)")
 
 
@@ -49,7 +52,11 @@ def scaled(pipeline: dict, folder: str) -> dict:
         cmd = re.sub(r"^(python -m offroad_path\.\w+)", rf"\1 experiment={presets[0]} paths.root={folder}", " ".join(stage["cmd"].split()))
         out["cmd"] = _moved(cmd, folder)
         out["deps"] = _entries(stage.get("deps", []), folder)
-        out["params"] = [*stage.get("params", []), *({f"conf/experiment/{preset}.yaml": None} for preset in presets)]
+        design = f"conf/evaluate/design/{DESIGNS.get(folder, 'laptop')}.yaml"
+        params = [
+            {design if k == LAPTOP_DESIGN else k: v for k, v in p.items()} if isinstance(p, dict) else p for p in stage.get("params", [])
+        ]
+        out["params"] = [*params, *({f"conf/experiment/{preset}.yaml": None} for preset in presets)]
         for key in ("outs", "metrics", "plots"):
             if key in stage:
                 out[key] = _entries(stage[key], folder)

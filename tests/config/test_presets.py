@@ -118,8 +118,9 @@ def test_every_trained_network_writes_one_folder_per_seed_and_evaluate_reads_the
 
 
 def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc_yaml(compose_config, monkeypatch):
-    """experiment=gpu: every look alike, ten times the drives, full-width networks on larger inputs, every core
-    working; gpu/dvc.yaml is dvc.yaml's stages under it (made by tools/scaled_pipeline.py), its grid gpu/params.yaml."""
+    """experiment=gpu: every look alike, twice the drives, full-width networks on larger inputs, every core
+    working, a pre-registered design of its own on a main test set no other run scores; gpu/dvc.yaml is
+    dvc.yaml's stages under it (made by tools/scaled_pipeline.py, its design file among the params), its grid gpu/params.yaml."""
     import yaml
     from omegaconf import OmegaConf
     from scaled_pipeline import ROOT, render
@@ -128,7 +129,9 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
 
     laptop, gpu = compose_config(), compose_config("experiment=gpu")
     assert all(gpu.world.appearance.weights[axis][value] > 0 for axis in gpu.world.appearance.weights for value in axis_values()[axis])
-    assert gpu.synthesize.sequences >= 10 * laptop.synthesize.sequences and gpu.model.width == 1.0
+    assert gpu.synthesize.sequences >= 2 * laptop.synthesize.sequences and gpu.model.width == 1.0
+    assert gpu.synthesize.test_worlds.main_stream == gpu.evaluate.main_test_set.stream != laptop.evaluate.main_test_set.stream
+    assert gpu.synthesize.test_worlds.min_blocks == gpu.evaluate.main_test_set.min_blocks and len(gpu.evaluate.seeds) >= 3
     assert gpu.data.width * gpu.data.height > laptop.data.width * laptop.data.height and gpu.data.num_workers > 0
     assert gpu.synthesize.workers == gpu.label.workers == gpu.drive.workers == 0  # 0: one per core
     assert (gpu.drive.width, gpu.drive.height) == (gpu.world.width, gpu.world.height)  # the camera the networks trained on
@@ -149,6 +152,7 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     assert list(pipeline["stages"]) == list(main["stages"])
     for name, stage in pipeline["stages"].items():
         assert "experiment=gpu paths.root=gpu" in stage["cmd"] and stage["wdir"] == ".."
+        assert "conf/evaluate/design/laptop.yaml" not in str(stage["params"]), name
         outputs = [next(iter(o)) if isinstance(o, dict) else o for key in ("outs", "metrics") for o in stage.get(key, [])]
         assert outputs and all(o.startswith(("gpu/data/", "gpu/metrics/")) for o in outputs), name
     grid = yaml.safe_load((ROOT / "gpu" / "params.yaml").read_text())
@@ -178,7 +182,7 @@ def test_the_tour_and_the_rehearsal_are_every_stage_on_tiny_worlds_into_their_ow
 
 
 def test_the_rehearsal_is_the_gpu_presets_settings_at_the_tours_sizes(compose_config):
-    """experiment=rehearsal runs what the GPU preset runs that can fail on a GPU host (the torch renderer,
+    """experiment=rehearsal runs what the GPU preset runs that can fail on a GPU host (its renderer,
     bf16, the loader's workers, every network, the closed loop's networks on auto) on tiny worlds, and
     on a CPU where there is no GPU."""
     gpu, tour, rehearsal = (compose_config(f"experiment={name}") for name in ("gpu", "tour", "rehearsal"))

@@ -78,7 +78,8 @@ def test_a_run_stopped_by_a_time_limit_keeps_the_times_of_the_stages_it_finished
     pipeline(tmp_path, {"first": ([], 0, False), "long": (["first"], 60, False)})
     timing = tmp_path / "pipeline_time.json"
     tool = Path(__file__).resolve().parents[2] / "tools" / "parallel_repro.py"
-    run = subprocess.Popen([sys.executable, str(tool), str(tmp_path / "dvc.yaml"), "--json", str(timing)], cwd=tmp_path)
+    log = tmp_path / "pipeline_time.log"
+    run = subprocess.Popen([sys.executable, str(tool), str(tmp_path / "dvc.yaml"), "--json", str(timing), "--log", str(log)], cwd=tmp_path)
     deadline = time.monotonic() + 60
     while not (timing.is_file() and "first" in json.loads(timing.read_text())["stages"]) and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -88,6 +89,7 @@ def test_a_run_stopped_by_a_time_limit_keeps_the_times_of_the_stages_it_finished
     timed = json.loads(timing.read_text())
     assert timed["complete"] is False and timed["unfinished"] == ["long"] and set(timed["stages"]) == {"first"}
     assert not (tmp_path / "long.txt").exists()
+    assert "[first] Running stage 'first'" in log.read_text()  # the stopped run's log is kept
 
 
 def test_bad_arguments_are_one_line_and_exit_2(tmp_path, capsys):
