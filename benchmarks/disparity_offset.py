@@ -96,10 +96,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         sets = {"rendered laptop preset": [str(p) for p in find_sequences(args.in_dir)]}
         if args.open:
-            from offroad_path.world.record import record_sequences
+            from offroad_path.world.record import Drive, record_sequences
 
             world = load_config(*args.set, *OPEN_WORLD).world
-            record_sequences(world, [(f"open_{i}", 1000 + i, False) for i in range(args.open)], Path(tmp))
+            record_sequences(world, [Drive(f"open_{i}", 1000 + i) for i in range(args.open)], Path(tmp))
             sets["open world, 2 m per frame"] = [str(p) for p in find_sequences(tmp)]
         if (Path(args.kitti) / "calib.txt").is_file():
             sets["KITTI snippet (real)"] = [args.kitti]

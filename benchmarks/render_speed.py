@@ -20,7 +20,7 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 
 from offroad_path.config import register_configs
-from offroad_path.world.record import record_sequences, sequence_seed
+from offroad_path.world.record import Drive, record_sequences, sequence_seed
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,7 +41,7 @@ def main() -> None:
     for workers in sorted({1, cores}):
         with tempfile.TemporaryDirectory() as tmp:
             start = time.perf_counter()
-            drives = [(f"seq_{i:03d}", sequence_seed(0, i), False) for i in range(args.sequences)]
+            drives = [Drive(f"seq_{i:03d}", sequence_seed(0, i)) for i in range(args.sequences)]
             record_sequences(cfg.world, drives, Path(tmp), workers, render=cfg.render)
             elapsed = time.perf_counter() - start
         print(f"workers={workers}: {elapsed:.1f} s, {frames / elapsed:.2f} stereo frames/s")

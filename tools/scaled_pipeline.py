@@ -1,6 +1,6 @@
 """The scaled pipelines: the main dvc.yaml's stages under a preset, every output under a folder of their own.
 
-    python tools/scaled_pipeline.py    # rewrites gpu/, tour/ and rehearsal/dvc.yaml from dvc.yaml
+    python tools/scaled_pipeline.py    # rewrites gpu/, tour/ and rehearsal/dvc.yaml from dvc.yaml, and their params.yaml
     dvc repro gpu/dvc.yaml             # the whole pipeline at the GPU preset's sizes
     dvc repro tour/dvc.yaml            # the five-minute tour: every stage on tiny worlds (a smoke run)
     dvc repro rehearsal/dvc.yaml       # the GPU preset's settings at the tour's sizes, on any machine
@@ -8,8 +8,8 @@
 One pipeline to edit (dvc.yaml); these files are made from it (tests/config/test_presets.py checks that they
 are up to date): each stage runs in the checkout (wdir ..) with `experiment=<preset> paths.root=<folder>`,
 reads the checkout's code and configs and conf/experiment/<preset>.yaml (and the presets it is made of), and writes <folder>/data/ and
-<folder>/metrics/, so the committed run stays as it is. The grid lists come from <folder>/params.yaml
-(the preset's seeds).
+<folder>/metrics/, so the committed run stays as it is. The grid lists come from <folder>/params.yaml,
+made from the composed preset (its networks, pretrainings and seeds).
 """
 
 from __future__ import annotations
@@ -68,9 +68,22 @@ def render(folder: str = "gpu", dvc_yaml: Path = ROOT / "dvc.yaml") -> str:
     return header(folder) + yaml.safe_dump(scaled(yaml.safe_load(dvc_yaml.read_text()), folder), sort_keys=False, width=200)
 
 
+def grid(folder: str) -> str:
+    """<folder>/params.yaml: the grid of the scaled pipeline's matrix stages (its dvc.yaml's vars), as its preset composes it."""
+    from offroad_path.config import load_config
+
+    evaluate = load_config(f"experiment={PIPELINES[folder][0]}").evaluate
+    lists = {key: list(evaluate[key]) for key in ("architectures", "pretrainings", "seeds", "drive_seeds")}
+    return (
+        f"# Made by `python tools/scaled_pipeline.py` from experiment={PIPELINES[folder][0]}: {folder}/dvc.yaml's grid (its vars).\n"
+        + yaml.safe_dump(lists, default_flow_style=None, sort_keys=False)
+    )
+
+
 def main() -> None:
     for folder in PIPELINES:
         (ROOT / folder / "dvc.yaml").write_text(render(folder))
+        (ROOT / folder / "params.yaml").write_text(grid(folder))
 
 
 if __name__ == "__main__":

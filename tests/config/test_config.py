@@ -108,6 +108,33 @@ def test_a_list_naming_a_value_twice_or_nothing_is_refused_before_any_work(overr
         validate_config(load_config(override))
 
 
+@pytest.mark.parametrize(
+    ("override", "says"),
+    [
+        ("seed=-1", r"seed=-1: must be a whole number in \[0, 4294967295\]"),
+        ("world.paved_fraction=1.5", r"world\.paved_fraction=1\.5: must be a number in \[0, 1\]"),
+        ("world.sun_elevation_deg=[70,20]", r"sun_elevation_deg=\[70\.0, 20\.0\]: must be \[low, high\].*with low <= high"),
+        ("label.odometry.min_inliers=0", r"label\.odometry\.min_inliers=0: must be a number >= 4"),
+        ("label.footprint.width_m=-2", r"label\.footprint\.width_m=-2\.0: must be a number > 0"),
+        ("drive.body_band_m=[2,0.5]", r"drive\.body_band_m=\[2\.0, 0\.5\]: must be \[low, high\]"),
+    ],
+)
+def test_a_number_out_of_its_range_is_refused_before_any_work(override, says):
+    from offroad_path.config import load_config, validate_config
+
+    with pytest.raises(ConfigValueError, match=says):
+        validate_config(load_config(override))
+
+
+@pytest.mark.parametrize("model", ["segnet", "unet"])
+def test_batch_norm_is_refused_before_any_work_for_a_network_whose_normalisation_is_not_a_choice(model):
+    from offroad_path.config import load_config, validate_config
+
+    with pytest.raises(ConfigValueError, match=rf"model\.batch_norm=True: {model} has batch norm after every convolution as published"):
+        validate_config(load_config(f"model={model}", "model.batch_norm=true"), ("model",))
+    validate_config(load_config("model=fcn", "model.batch_norm=true"), ("model",))  # FCN-8s's is a choice
+
+
 def test_each_choice_list_is_the_one_its_implementation_uses():
     """config/ holds the names a setting may take; the module that implements them imports the list or
     keys a table by exactly those names, so the schema's check and the code cannot drift apart."""

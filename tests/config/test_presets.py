@@ -123,7 +123,7 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
     dvc.yaml's stages under it (made by tools/scaled_pipeline.py, its design file among the params), its grid gpu/params.yaml."""
     import yaml
     from omegaconf import OmegaConf
-    from scaled_pipeline import ROOT, render
+    from scaled_pipeline import ROOT, grid, render
 
     from offroad_path.looks import axis_values
 
@@ -155,8 +155,8 @@ def test_gpu_preset_scales_the_laptop_pipeline_and_its_dvc_file_is_made_from_dvc
         assert "conf/evaluate/design/laptop.yaml" not in str(stage["params"]), name
         outputs = [next(iter(o)) if isinstance(o, dict) else o for key in ("outs", "metrics") for o in stage.get(key, [])]
         assert outputs and all(o.startswith(("gpu/data/", "gpu/metrics/")) for o in outputs), name
-    grid = yaml.safe_load((ROOT / "gpu" / "params.yaml").read_text())
-    assert {key: list(gpu.evaluate[key]) for key in grid} == grid
+    assert (ROOT / "gpu" / "params.yaml").read_text() == grid("gpu"), "gpu/params.yaml is stale: python tools/scaled_pipeline.py"
+    assert yaml.safe_load(grid("gpu"))["seeds"] == list(gpu.evaluate.seeds)
 
 
 @pytest.mark.parametrize("folder", ["tour", "rehearsal"])
@@ -165,7 +165,7 @@ def test_the_tour_and_the_rehearsal_are_every_stage_on_tiny_worlds_into_their_ow
     repro runs the same preset, tests/repository/test_pipeline_dvc.py) or experiment=rehearsal, outputs
     under their folder, an MLflow experiment of their own."""
     import yaml
-    from scaled_pipeline import ROOT, render
+    from scaled_pipeline import ROOT, grid, render
 
     preset = compose_config(f"experiment={folder}")
     assert (ROOT / folder / "dvc.yaml").read_text() == render(folder), f"{folder}/dvc.yaml is stale: python tools/scaled_pipeline.py"
@@ -175,8 +175,8 @@ def test_the_tour_and_the_rehearsal_are_every_stage_on_tiny_worlds_into_their_ow
         assert f"experiment={folder} paths.root={folder}" in stage["cmd"], name
         outputs = [next(iter(o)) if isinstance(o, dict) else o for key in ("outs", "metrics") for o in stage.get(key, [])]
         assert outputs and all(o.startswith((f"{folder}/data/", f"{folder}/metrics/")) for o in outputs), name
-    grid = yaml.safe_load((ROOT / folder / "params.yaml").read_text())
-    assert {key: list(preset.evaluate[key]) for key in grid} == grid
+    assert (ROOT / folder / "params.yaml").read_text() == grid(folder), f"{folder}/params.yaml is stale: python tools/scaled_pipeline.py"
+    assert yaml.safe_load(grid(folder))["architectures"] == list(preset.evaluate.architectures)
     assert preset.mlflow.experiment not in (compose_config().mlflow.experiment, compose_config("experiment=gpu").mlflow.experiment)
     assert preset.trainer.max_epochs == 1 and preset.world.frames == compose_config("experiment=tour").world.frames
 
@@ -187,9 +187,10 @@ def test_the_rehearsal_is_the_gpu_presets_settings_at_the_tours_sizes(compose_co
     on a CPU where there is no GPU."""
     gpu, tour, rehearsal = (compose_config(f"experiment={name}") for name in ("gpu", "tour", "rehearsal"))
     same = ("render", "drive.device", "trainer.precision", "data.num_workers", "data.pin_memory", "synthesize.workers",
-            "label.workers", "drive.workers", "evaluate.architectures", "evaluate.pretrainings", "world.appearance")  # fmt: skip
+            "label.workers", "drive.workers", "evaluate.pretrainings", "world.appearance")  # fmt: skip
     for key in same:
         assert OmegaConf.select(rehearsal, key) == OmegaConf.select(gpu, key), key
+    assert sorted(rehearsal.evaluate.architectures) == sorted(gpu.evaluate.architectures)  # every network (conf/model/)
     sizes = ("world.frames", "world.width", "synthesize.sequences", "synthesize.test_worlds.min_blocks", "data.width")
     for key in (*sizes, "synthesize.test_worlds.stress_sets", "model.width", "drive.length_m", "drive.worlds", "trainer.max_epochs"):
         assert OmegaConf.select(rehearsal, key) == OmegaConf.select(tour, key), key

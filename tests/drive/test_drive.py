@@ -12,8 +12,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from offroad_path.drive.closed_loop import finding, score, versus_end_to_end
 from offroad_path.drive.course import Course
+from offroad_path.drive.interventions import finding, score, versus_end_to_end
 from offroad_path.drive.loop import LoopSettings, Setup, drive
 from offroad_path.drive.policies import OraclePolicy, Policy, StraightPolicy
 from offroad_path.drive.vehicle import State, Vehicle, advance

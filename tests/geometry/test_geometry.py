@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offroad_path.geometry.path import distance_along, mirror, path_length
+from offroad_path.geometry.path import distance_along, label_end, mirror, path_length
 from offroad_path.viz import OUTLINE, overlay
 
 
@@ -16,6 +16,14 @@ def test_distance_along_positions_and_poses():
     poses[:, :3, 3] = positions
     np.testing.assert_allclose(distance_along(poses), [0.0, 5.0, 5.0, 18.0])
     assert path_length(poses) == pytest.approx(18.0)
+
+
+def test_a_label_ends_at_the_first_frame_farther_than_its_distance_in_a_straight_line():
+    line = np.c_[np.zeros(30), np.zeros(30), np.arange(30.0)]  # 1 m apart
+    assert label_end(line, 0, 20.0) == 21 and label_end(line, 5, 20.0) == 26  # 21 m > 20; exactly 20 m is not beyond
+    assert label_end(line, 9, 20.0) is None  # frame 29 is 20 m ahead: no frame beyond
+    u_turn = np.c_[np.r_[np.zeros(15), np.full(15, 3.0)], np.zeros(30), np.r_[np.arange(15.0), np.arange(14.0, -1, -1)]]
+    assert label_end(u_turn, 0, 20.0) is None  # 28 m driven, never 20 m away
 
 
 def test_mirror_flips_left_right_and_is_contiguous():

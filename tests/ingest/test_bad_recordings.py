@@ -146,6 +146,17 @@ def test_a_truncated_video_is_refused_not_half_ingested(compose_config, frames, 
     refused(ingest, cfg, capsys, tmp_path, str(right), f"declares {len(frames)} frames but only")
 
 
+def test_a_video_pair_of_unequal_lengths_is_refused_not_half_dropped(compose_config, frames, calibration, tmp_path, capsys):
+    """A bag refuses more than ingest.max_unpaired_fraction of images without a partner; two videos of
+    12 and 6 frames once ingested 6 pairs and dropped the rest without a word."""
+    left = write_avi(tmp_path / "left.avi", [pair[0] for pair in frames])
+    right = write_avi(tmp_path / "right.avi", [pair[1] for pair in frames[: len(frames) // 2]])
+    cfg = compose_config(f"ingest.videos.left={left}", f"ingest.videos.right={right}", f"ingest.calibration={calibration}",
+                         "ingest.videos.offset_frames=0", f"ingest.out_dir={tmp_path / 'out'}")  # fmt: skip
+    unpaired = len(frames) - len(frames) // 2
+    refused(ingest, cfg, capsys, tmp_path, str(right), f"{unpaired} of {len(frames) + len(frames) // 2} frames have no partner")
+
+
 def test_one_video_as_both_cameras(compose_config, frames, calibration, tmp_path, capsys):
     video = write_avi(tmp_path / "left.avi", [pair[0] for pair in frames])
     cfg = compose_config(f"ingest.videos.left={video}", f"ingest.videos.right={tmp_path / '.' / 'left.avi'}",

@@ -144,6 +144,16 @@ def test_predict_refuses_a_decompression_bomb_from_its_header(compose_config, tr
     refused(run_predict, cfg, capsys, tmp_path, bomb, "30000x30000")
 
 
+def test_predict_refuses_an_image_too_small_to_be_a_cameras_view(compose_config, trained, frames_folder, tmp_path, capsys):
+    """A 1 x 1 image was once scored as a path: under 32 pixels on a side is no camera's view."""
+    import cv2
+
+    tiny = frames_folder / "000001.png"
+    cv2.imwrite(str(tiny), np.zeros((1, 1, 3), np.uint8))
+    cfg = compose_config(f"predict.checkpoint={trained[0]}", f"predict.input={frames_folder}", f"predict.out_dir={tmp_path / 'out'}")
+    refused(run_predict, cfg, capsys, tmp_path, tiny, "is 1x1 pixels: a camera image has at least 32 on each side")
+
+
 def test_label_refuses_a_decompression_bomb_in_a_recording(compose_config, recordings, tmp_path, capsys):
     bomb = png_declaring(recordings / "drive" / "image_l" / "000000.png", 30000, 30000)
     refused(label, label_cfg(compose_config, recordings, tmp_path), capsys, tmp_path, bomb, "30000x30000")
@@ -229,7 +239,7 @@ def test_the_cli_runs_the_same_checks(tmp_path):
     [
         (["label.strategy=stride", "label.stride_m=1e-9"], ["label.stride_m=1e-09", ">= 0.05"]),
         (["label.strategy=stride", "label.stride_m=25"], ["label.stride_m=25", "at most label.distance_m (20)"]),
-        (["label.footprint.width_m=-1.9"], ["label.footprint.width_m", "-1.9 must be > 0"]),
+        (["label.footprint.width_m=-1.9"], ["label.footprint.width_m=-1.9", "must be a number > 0"]),
         (["label.footprint.front_m=-3"], ["label.footprint.front_m", "must lie ahead of the vehicle's rear"]),
     ],
     ids=["stride too short", "stride beyond D", "negative width", "front behind rear"],

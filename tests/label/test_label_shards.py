@@ -13,7 +13,7 @@ import pytest
 from helpers import label_cfg, refused, snapshot
 
 from offroad_path.label import label
-from offroad_path.world.record import record_sequences
+from offroad_path.world.record import Drive, record_sequences
 
 TINY = ("label.distance_m=4.0", "label.stride_m=1.0")
 
@@ -23,7 +23,7 @@ def three_drives(compose_config, tmp_path_factory) -> Path:
     """Three 12-frame drives of the tiny world, each from its own seed."""
     root = tmp_path_factory.mktemp("three") / "recordings"
     world = compose_config("world.frames=12", "world.width=256", "world.height=144", "world.max_distance_m=40").world
-    record_sequences(world, [(f"drive_{i}", 40 + i, False) for i in range(3)], root, workers=1)
+    record_sequences(world, [Drive(f"drive_{i}", 40 + i) for i in range(3)], root, workers=1)
     return root
 
 

@@ -2,10 +2,21 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
-from offroad_path.sequence.footprint import Occlusion, VehicleFootprint, clip_near, footprint_depth, path_mask, project, swept_polygons
+from offroad_path.sequence.footprint import (
+    Occlusion,
+    VehicleFootprint,
+    clip_near,
+    footprint_depth,
+    path_label,
+    path_mask,
+    project,
+    swept_polygons,
+)
 
 K = np.array([[100.0, 0.0, 50.0], [0.0, 100.0, 40.0], [0.0, 0.0, 1.0]])
 SIZE = (100, 80)
@@ -31,6 +42,8 @@ def test_straight_ahead_corners_project_where_computed_by_hand():
     mask = path_mask(footprint_depth(swept_polygons(poses, 0, 1, CAR), K, SIZE))
     assert mask[65, 50] == 255 and mask[61, 35] == 255  # inside the trapezoid
     assert mask[65, 10] == 0 and mask[58, 50] == 0 and mask[40, 50] == 0  # beside it, beyond it, at the horizon
+    camera = SimpleNamespace(calibration=SimpleNamespace(K=K), image_size=SIZE)  # what path_label reads of a sequence
+    assert np.array_equal(path_label(camera, poses, (0, 1), CAR), mask)
 
 
 def test_a_turn_carries_the_footprint_round():

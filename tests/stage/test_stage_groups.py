@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import re
 import subprocess
 import sys
 
@@ -85,6 +86,59 @@ def test_dvc_params_list_the_files_of_every_declared_group(name):
     for group in stage.reads:
         files = [p for p in params if p.startswith(f"conf/{group}/")]
         assert files, f"dvc.yaml stage {name} reads {group} but lists no conf/{group}/ file in its params"
+
+
+NUMBER = (int, float)
+
+
+def numeric_settings(schema: type, prefix: str = "") -> dict[str, bool]:
+    """Every setting of the schemas that holds numbers (int, float, optional or a tuple of them): key -> whether it has a rule."""
+    import dataclasses
+    import types
+    import typing
+
+    hints, out = typing.get_type_hints(schema), {}
+    for f in dataclasses.fields(schema):
+        if f.default_factory is not dataclasses.MISSING and dataclasses.is_dataclass(nested := f.default_factory()):
+            out |= numeric_settings(type(nested), f"{prefix}{f.name}.")
+            continue
+        kinds = typing.get_args(hints[f.name]) if isinstance(hints[f.name], types.UnionType) or typing.get_origin(hints[f.name]) else ()
+        kinds = kinds or (hints[f.name],)
+        if any(kind in NUMBER for kind in kinds):
+            out[f"{prefix}{f.name}"] = "rule" in f.metadata
+    return out
+
+
+def borrowed(raw: dict, groups: tuple[str, ...], prefix: str = "") -> list[str]:
+    """Keys under `groups` whose value is an interpolation of a key of another group (unresolved config)."""
+    found = []
+    for key, value in raw.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            found += borrowed(value, groups, f"{name}.")
+        elif isinstance(value, str) and name.split(".")[0] in groups:
+            found += [name for target in re.findall(r"\$\{([\w.]+)\}", value) if target.split(".")[0] not in groups]
+    return found
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_every_number_a_stage_reads_is_checked_by_its_own_rules(command, compose_config):
+    """A stage checks every value it sees before any work (validate_config, on its groups alone): each
+    number of its groups has a rule, and a value its groups take from another group's (an interpolation,
+    as synthesize.test_worlds.horizon_m takes label.distance_m) is checked where it lands, so a bad
+    value there is refused by this stage too."""
+    from omegaconf import OmegaConf
+
+    from offroad_path.config import Config
+
+    stage, numbers = stage_of(command), numeric_settings(Config)
+    unchecked = sorted(key for key, ruled in numbers.items() if key.split(".")[0] in stage.reads and not ruled)
+    assert not unchecked, f"{command} reads numbers without a rule: {unchecked}"
+    raw = OmegaConf.to_container(compose_config(), resolve=False)
+    taken = borrowed(raw, stage.reads)
+    assert all(numbers.get(key, True) for key in taken), f"{command}: {[k for k in taken if not numbers.get(k, True)]}"
+    if command == "synthesize":  # the case that once slipped through: the label stage's distance, read by the test worlds
+        assert "synthesize.test_worlds.horizon_m" in taken and numbers["synthesize.test_worlds.horizon_m"]
 
 
 def test_reading_an_undeclared_group_fails(compose_config):

@@ -98,7 +98,7 @@ def test_an_interval_within_the_smallest_effect_reads_no_material_difference_wha
     assert "| no material difference (within ±0.01) |" in rows and "| real's IoU lower |" in rows and "| no difference measured |" in rows
     for bad in (0, -0.01, float("nan"), "a lot"):
         with pytest.raises(InputError, match=r"evaluate.conclusions.primaries.x.smallest_effect"):
-            check_declared({"x": {"claim": "x", "compare": "uncertainty/a_vs_b", "smallest_effect": bad}}, {})
+            check_declared({"x": {"claim": "x", "compare": "uncertainty/a_vs_b", "smallest_effect": bad}}, {}, ("uncertainty",))
 
 
 def test_a_readme_whose_verdict_was_edited_to_claim_a_direction_fails_the_check(tmp_path, capsys):

@@ -83,3 +83,36 @@ def test_a_stop_while_mlflow_makes_the_stages_run_ends_that_run_killed(tmp_path,
     finally:
         signal.signal(signal.SIGTERM, previous)
     assert seen_by_the_stop == [[("KILLED",)]]
+
+
+def test_a_run_whose_process_was_killed_outright_ends_killed_with_its_repro_parent(tmp_path):
+    """SIGKILL leaves no handler to run: the killed stage's run stays RUNNING and the repro's parent as
+    its last finished stage ended it. The next stage that logs ends both KILLED; a live process's run
+    and another host's stay as they are."""
+    import subprocess
+    import sys
+
+    from mlflow.tracking import MlflowClient
+    from omegaconf import OmegaConf
+
+    from offroad_path.utils.tracking import PROCESS_TAG, process_key, stage_run
+
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    cfg = OmegaConf.create(
+        {"experiment_name": "x", "label": {"stride_m": 1.0}, "mlflow": {"enabled": True, "experiment": "x", "tracking_uri": uri}}
+    )
+    client = MlflowClient(uri)
+    experiment = client.create_experiment("x")
+    killed = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    gone = process_key(killed.pid)
+    killed.kill()
+    killed.wait()
+    parent = client.create_run(experiment, tags={"stage": "dvc repro", "dvc_repro": "host-1-1"}).info.run_id
+    client.set_terminated(parent, "FINISHED")
+    stale = client.create_run(experiment, tags={"mlflow.parentRunId": parent, PROCESS_TAG: gone}).info.run_id
+    alive = client.create_run(experiment, tags={PROCESS_TAG: process_key(os.getpid())}).info.run_id
+    elsewhere = client.create_run(experiment, tags={PROCESS_TAG: "another-host-1-1"}).info.run_id
+    with stage_run(cfg, "label"):
+        pass
+    status = {run: client.get_run(run).info.status for run in (stale, parent, alive, elsewhere)}
+    assert status == {stale: "KILLED", parent: "KILLED", alive: "RUNNING", elsewhere: "RUNNING"}

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from offroad_path.world.record import _shutter_metres, camera_for, record_sequence, record_sequences
+from offroad_path.world.record import Drive, _shutter_metres, camera_for, record_sequence, record_sequences
 from offroad_path.world.render import render_view
 from offroad_path.world.render_torch import DeviceWorld, render_views, torch_device
 from offroad_path.world.scene import build_world
@@ -61,7 +61,7 @@ def test_synthesize_writes_the_same_sequence_with_either_renderer(compose_config
     cfg = compose_config(*small, "render.backend=torch", "render.device=cpu", "render.views_per_batch=6")
     numpy_dir, torch_dir = tmp_path / "numpy", tmp_path / "torch" / "test_000"
     record_sequence(cfg.world, 5, numpy_dir, "main")
-    record_sequences(cfg.world, [("test_000", 5, True)], torch_dir.parent, workers=1, render=cfg.render)  # as the stage calls it
+    record_sequences(cfg.world, [Drive("test_000", 5, "main")], torch_dir.parent, workers=1, render=cfg.render)  # as the stage calls it
     files = sorted(p.relative_to(numpy_dir) for p in numpy_dir.rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(torch_dir) for p in torch_dir.rglob("*") if p.is_file())
     assert json.loads((numpy_dir / "meta.json").read_text()) == json.loads((torch_dir / "meta.json").read_text())

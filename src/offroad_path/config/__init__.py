@@ -18,7 +18,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, BooleanNode, DictConfig, OmegaConf
 
-from offroad_path.config.common import CONF_DIR, THREADS
+from offroad_path.config.common import CONF_DIR, THREADS, model_names
 from offroad_path.config.evaluate_schema import DriveConfig, EvaluateConfig
 from offroad_path.config.label_schema import IngestConfig, LabelConfig, SplitConfig
 from offroad_path.config.serving import ExportConfig, MlflowConfig, PredictConfig
@@ -31,10 +31,11 @@ from offroad_path.config.training_schema import (
     SteeringConfig,
     TrainConfig,
     TrainerConfig,
+    check_batch_norm,
 )
 from offroad_path.config.world_schema import PathsConfig, RenderConfig, RigConfig, SynthesizeConfig, WorldConfig, check_looks_drawable
 from offroad_path.errors import InputError
-from offroad_path.utils.rules import setting, validate
+from offroad_path.utils.rules import SEED, setting, validate
 
 
 @dataclass
@@ -64,7 +65,7 @@ class Config:
     export: ExportConfig = field(default_factory=ExportConfig)
     mlflow: MlflowConfig = field(default_factory=MlflowConfig)
     experiment_name: str = MISSING
-    seed: int = MISSING  # the training seed (pretrain, train, train_steering)
+    seed: int = setting(SEED)  # the training seed (pretrain, train, train_steering)
     resume: bool = MISSING  # continue an interrupted training run from its last.ckpt (in .resume/ beside out_dir); false: start afresh
     optimized_metric: str | None = MISSING  # the stage's metric a Hydra sweeper optimises (hparams_search)
     threads: str = setting(THREADS)  # torch, OpenCV and OpenMP threads of a stage's process: all, free or a number
@@ -76,6 +77,8 @@ def validate_config(cfg: DictConfig, groups: tuple[str, ...] | None = None) -> N
     validate(cfg, Config, only=groups)
     if (groups is None or "world" in groups) and OmegaConf.select(cfg, "world.appearance") is not None:
         check_looks_drawable(cfg.world.appearance)
+    if (groups is None or "model" in groups) and OmegaConf.select(cfg, "model") is not None:
+        check_batch_norm(cfg.model)
 
 
 def run_grid(architectures: list[str], pretrainings: list[str]) -> list[str]:
@@ -105,6 +108,7 @@ def register_configs() -> None:
     OmegaConf.register_new_resolver("run_grid", run_grid, replace=True)
     OmegaConf.register_new_resolver("join", join_path, replace=True)
     OmegaConf.register_new_resolver("steering_folder", steering_folder, replace=True)
+    OmegaConf.register_new_resolver("model_names", lambda: list(model_names()), replace=True)  # every network of conf/model
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=Config)
     cs.store(group="world/rig", name="rig_schema", node=RigConfig, package="world.rig")

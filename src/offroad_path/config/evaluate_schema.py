@@ -8,7 +8,7 @@ from omegaconf import MISSING
 
 from offroad_path.config.common import IMAGE_SIZE, PRETRAININGS, model_names
 from offroad_path.config.world_schema import VehicleConfig
-from offroad_path.utils.rules import at_least, between, distinct, each, one_of, positive, setting, torch_device
+from offroad_path.utils.rules import SEED, at_least, between, distinct, each, one_of, ordered_pair, positive, setting, torch_device
 
 
 @dataclass
@@ -29,8 +29,19 @@ class BootstrapConfig:
     """Intervals by resampling the test set's blocks of driving (offroad_path.statistics.bootstrap)."""
 
     resamples: int = setting(at_least(100))
-    seed: int = MISSING
+    seed: int = setting(SEED)
     level: float = setting(between(0, 1, low_open=True, high_open=True))
+
+
+# The drive's arguments against end-to-end steering (the keys of drive.arguments), each with the
+# question it asks; the drive reports each under its name.
+DRIVE_ARGUMENTS = {
+    "steering": "(a) closed loop: does predicting the path drive better than predicting the steering?",
+    "vehicle": "(b) another vehicle: the same networks on a vehicle with 1.5 x the wheelbase, another lock and a higher camera",
+    "traction": "(c) traction: the same networks on ground where the vehicle turns less than the bicycle model says (world.slip)",
+}
+# The report sections a primary's compare may name: the evaluate stage's two, then the drive's arguments.
+PRIMARY_SECTIONS = ("uncertainty", "steering_from_paths", *DRIVE_ARGUMENTS)
 
 
 @dataclass
@@ -116,7 +127,7 @@ class DriveConfig:
     speed_mps: float = setting(positive())
     steering_rate_deg_s: float = setting(positive())
     corridor_m: float = setting(positive())
-    body_band_m: tuple[float, float] = MISSING
+    body_band_m: tuple[float, float] = setting(ordered_pair(0, float("inf")))
     foliage_is_obstacle: bool = MISSING
     water_intervenes: bool = MISSING
     respawn_m: float = setting(positive())

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from omegaconf import MISSING
 
 from offroad_path.config.common import IMAGE_SIZE, PITCH
-from offroad_path.utils.rules import at_least, between, numbers, one_of, positive, rule, setting
+from offroad_path.utils.rules import FINITE, SEED, at_least, between, numbers, one_of, positive, rule, setting
 
 # The choices these schemas accept, each implemented by the module named beside it (which imports
 # its list from here; tests/config/test_config.py checks an implementation that keys a table by them).
@@ -41,9 +41,9 @@ class OcclusionConfig:
 class FootprintConfig:
     """The vehicle's ground footprint relative to the camera; None: take it from meta.json."""
 
-    width_m: float | None = MISSING
-    front_m: float | None = MISSING
-    rear_m: float | None = MISSING
+    width_m: float | None = setting(positive())
+    front_m: float | None = setting(FINITE)
+    rear_m: float | None = setting(FINITE)
     camera_height_m: float | None = setting(positive())
     camera_pitch_deg: float | None = setting(PITCH)
 
@@ -61,7 +61,7 @@ class IngestTopicsConfig:
 class IngestVideosConfig:
     left: str | None = MISSING
     right: str | None = MISSING
-    offset_frames: int | None = MISSING
+    offset_frames: int | None = setting(FINITE)
     max_offset_frames: int = setting(at_least(1))
 
 
@@ -97,9 +97,9 @@ class DisparityConfig:
 
     num_disparities: int = setting(rule(lambda v: v > 0 and v % 16 == 0, "must be a positive multiple of 16"))
     block_size: int = setting(rule(lambda v: v >= 1 and v % 2 == 1, "must be an odd number >= 1"))
-    uniqueness_ratio: int = MISSING
-    speckle_window: int = MISSING
-    speckle_range: int = MISSING
+    uniqueness_ratio: int = setting(between(0, 100))
+    speckle_window: int = setting(at_least(0))
+    speckle_range: int = setting(at_least(0))
 
 
 @dataclass
@@ -108,21 +108,21 @@ class OdometryConfig:
     window, fallback and depth-weighting settings are the windowed estimator's."""
 
     method: str = setting(one_of(ODOMETRY_METHODS))
-    max_features: int = MISSING
-    bucket_rows: int = MISSING
-    bucket_cols: int = MISSING
-    corner_quality: float = MISSING  # corners weaker than this fraction of the strongest are ignored
-    lk_window: int = MISSING  # small windows: less perspective distortion of slanted ground between views
-    lk_levels: int = MISSING
-    max_row_error_px: float = MISSING  # stereo matches must stay on the same row (rectified)
-    min_disparity_px: float = MISSING
-    max_depth_m: float = MISSING
-    forward_backward_px: float = MISSING
-    ransac_reprojection_px: float = MISSING
-    ransac_iterations: int = MISSING
-    refine_iterations: int = MISSING
-    huber_px: float = MISSING
-    min_inliers: int = MISSING
+    max_features: int = setting(at_least(1))
+    bucket_rows: int = setting(at_least(1))
+    bucket_cols: int = setting(at_least(1))
+    corner_quality: float = setting(between(0, 1, low_open=True))  # corners weaker than this fraction of the strongest are ignored
+    lk_window: int = setting(at_least(3))  # small windows: less perspective distortion of slanted ground between views
+    lk_levels: int = setting(at_least(0))
+    max_row_error_px: float = setting(positive())  # stereo matches must stay on the same row (rectified)
+    min_disparity_px: float = setting(positive())
+    max_depth_m: float = setting(positive())
+    forward_backward_px: float = setting(positive())
+    ransac_reprojection_px: float = setting(positive())
+    ransac_iterations: int = setting(at_least(1))
+    refine_iterations: int = setting(at_least(0))
+    huber_px: float = setting(positive())
+    min_inliers: int = setting(at_least(4))
     window: int = setting(at_least(2))  # keyframes in the bundle adjustment
     keyframe_distance_m: float = setting(at_least(0))  # a frame this far from the last keyframe becomes one
     window_iterations: int = setting(at_least(1))
@@ -167,4 +167,4 @@ class SplitConfig:
     block_m: float = setting(positive())
     guard_m: float = setting(at_least(0))
     mirror: bool = MISSING
-    seed: int = MISSING
+    seed: int = setting(SEED)

@@ -51,7 +51,7 @@ class ExportConfig:
 
     checkpoint: str = MISSING
     out: str = MISSING  # outside DVC's outputs
-    opset: int = MISSING
+    opset: int = setting(at_least(9))
     tolerance: float = setting(positive())  # max abs difference of the path confidence against PyTorch
 
 

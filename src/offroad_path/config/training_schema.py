@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from omegaconf import MISSING
 
 from offroad_path.config.common import IMAGE_SIZE, MAX_STEPS, PRETRAININGS, model_names
-from offroad_path.utils.rules import accelerator, at_least, between, each, one_of, positive, setting
+from offroad_path.utils.rules import ConfigValueError, accelerator, at_least, between, each, one_of, positive, setting
 
 UNKNOWN_DEPTH = ("keep", "drop")  # postprocess.unknown_depth: inference.path_filter
 BALANCES = ("none", "oversample", "weighted")  # steering.balance: steering.balance
@@ -58,6 +59,20 @@ class ModelConfig:
     paper: PaperTrainingConfig | None = None  # absent for a network the paper did not train
 
 
+# Networks whose normalisation is a choice (model.batch_norm): FCN-8s has none as published. SegNet
+# and U-Net have batch norm after every convolution as published, which is theirs to keep.
+BATCH_NORM_CHOICE = ("fcn",)
+
+
+def check_batch_norm(model: Any) -> None:
+    """model.batch_norm only for a network whose normalisation is a choice: one line, before any work."""
+    if model.get("batch_norm") is not None and model.get("name") not in BATCH_NORM_CHOICE:
+        raise ConfigValueError(
+            f"model.batch_norm={model.batch_norm}: {model.name} has batch norm after every convolution as published, not a choice "
+            f"(null; a choice of {', '.join(BATCH_NORM_CHOICE)} only)"
+        )
+
+
 @dataclass
 class PretrainingConfig:
     name: str = setting(one_of(PRETRAININGS))
@@ -76,7 +91,7 @@ class TrainerConfig:
     accelerator: str = setting(accelerator())  # Lightning's: auto, cpu, gpu, ... (one this machine has)
     devices: str = MISSING
     strategy: str = MISSING  # ddp across GPUs (trainer=ddp)
-    num_nodes: int = MISSING
+    num_nodes: int = setting(at_least(1))
     sync_batchnorm: bool = MISSING  # batch norm's statistics over the global batch (trainer=ddp)
     precision: str = MISSING
     deterministic: bool = MISSING
@@ -134,7 +149,7 @@ class SteeringConfig:
     max_epochs: int = setting(at_least(1))
     patience: int = setting(at_least(1))  # early stopping on validation mean absolute error
     mirror: bool = MISSING  # add mirrored copies with negated steering
-    jitter: float = MISSING  # photometric augmentation (no geometric: it would change the steering)
+    jitter: float = setting(between(0, 1))  # photometric augmentation (no geometric: it would change the steering)
     cache_mb: float = setting(at_least(0))  # decoded images kept in memory (0: decode each epoch)
     # the straight-ahead bias's remedy: none | oversample | weighted
     balance: str = setting(one_of(BALANCES))

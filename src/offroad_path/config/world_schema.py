@@ -12,6 +12,7 @@ from omegaconf import MISSING
 from offroad_path.config.common import FINITE, IMAGE_SIZE, PITCH
 from offroad_path.looks import axis_values
 from offroad_path.utils.rules import (
+    SEED,
     ConfigValueError,
     Rule,
     at_least,
@@ -19,6 +20,7 @@ from offroad_path.utils.rules import (
     distinct,
     each,
     one_of,
+    ordered_pair,
     positive,
     rule,
     setting,
@@ -47,7 +49,7 @@ class PathsConfig:
 @dataclass
 class RigConfig:
     name: str = MISSING
-    baseline_m: float = MISSING
+    baseline_m: float = setting(positive())
 
 
 @dataclass
@@ -131,20 +133,20 @@ class WorldConfig:
     width: int = setting(IMAGE_SIZE)
     height: int = setting(IMAGE_SIZE)
     hfov_deg: float = setting(between(1, 179))
-    max_distance_m: float = MISSING
-    hill_height_m: float = MISSING
-    bump_height_m: float = MISSING
-    max_curvature: float = MISSING  # 1/m; the peak of a drive, reached once or twice per sequence
-    track_width_m: float = MISSING
-    trees_per_hectare: float = MISSING
-    bushes_per_hectare: float = MISSING
-    obstacles_per_100m: float = MISSING
-    puddles_per_100m: float = MISSING
-    forks_per_100m: float = MISSING
-    offtrack_per_100m: float = MISSING
-    paved_fraction: float = MISSING
-    sun_elevation_deg: tuple[float, float] = MISSING
-    density_jitter: float = MISSING  # per-sequence density factor drawn in [1 - j, 1 + j]
+    max_distance_m: float = setting(positive())
+    hill_height_m: float = setting(at_least(0))
+    bump_height_m: float = setting(at_least(0))
+    max_curvature: float = setting(positive())  # 1/m; the peak of a drive, reached once or twice per sequence
+    track_width_m: float = setting(positive())
+    trees_per_hectare: float = setting(at_least(0))
+    bushes_per_hectare: float = setting(at_least(0))
+    obstacles_per_100m: float = setting(at_least(0))
+    puddles_per_100m: float = setting(at_least(0))
+    forks_per_100m: float = setting(at_least(0))
+    offtrack_per_100m: float = setting(at_least(0))
+    paved_fraction: float = setting(between(0, 1))
+    sun_elevation_deg: tuple[float, float] = setting(ordered_pair(0, 90, low_open=True))
+    density_jitter: float = setting(between(0, 1, high_open=True))  # per-sequence density factor drawn in [1 - j, 1 + j]
     slip: SlipConfig = field(default_factory=SlipConfig)
     appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
 
@@ -177,7 +179,7 @@ class RenderConfig:
 @dataclass
 class SynthesizeConfig:
     sequences: int = setting(at_least(1))
-    seed: int = MISSING
+    seed: int = setting(SEED)
     test_worlds: TestWorldsConfig = field(default_factory=TestWorldsConfig)
     workers: int = setting(at_least(0))  # 0: one per CPU core
     out_dir: str = MISSING

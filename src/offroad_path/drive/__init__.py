@@ -17,6 +17,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS
 from offroad_path.stage import hydra_stage, reads
 from offroad_path.utils.atomic import atomic_directory, write_text_atomic
 from offroad_path.utils.outputs import Outputs
@@ -36,10 +37,9 @@ def outputs(cfg: DictConfig) -> Outputs:
 def check_policies(d: DictConfig) -> None:
     """Every argument is known and every policy's checkpoint exists for every seed, before any world is built."""
     from offroad_path.drive.worlds import BUILT_IN, TEMPORAL, checkpoint_of, pilotnet_checkpoint
-    from offroad_path.report.rendering import ARGUMENTS
 
-    if unknown := sorted(set(d.arguments) - set(ARGUMENTS)):
-        raise ValueError(f"drive.arguments: unknown argument {unknown[0]!r} (arguments: {', '.join(ARGUMENTS)})")
+    if unknown := sorted(set(d.arguments) - set(DRIVE_ARGUMENTS)):
+        raise ValueError(f"drive.arguments: unknown argument {unknown[0]!r} (arguments: {', '.join(DRIVE_ARGUMENTS)})")
     for argument, names in d.arguments.items():
         if not names:
             raise ValueError(f"drive.arguments.{argument}: lists no policy (leave the argument out instead)")
@@ -62,10 +62,9 @@ def check_policies(d: DictConfig) -> None:
 @reads("drive", "world", "render", "postprocess", "label", "evaluate", "mlflow", writes=outputs)
 def run_drive(cfg: DictConfig) -> dict:
     # The networks and the renderer (torch among them) once the config and outputs are checked.
-    from offroad_path.drive.closed_loop import check_arguments_primaries, report
+    from offroad_path.drive.interventions import check_arguments_primaries, report
     from offroad_path.drive.loop import DriveLog
     from offroad_path.drive.worlds import WorldJob, check_worlds, drive_params, drive_world, test_worlds
-    from offroad_path.report.rendering import ARGUMENTS
 
     drive = cfg.drive
     check_policies(drive)
@@ -109,7 +108,7 @@ def run_drive(cfg: DictConfig) -> dict:
         "drove %d test worlds in %.0f s; %s",
         len(worlds),
         time.perf_counter() - started,
-        "; ".join(f"{a}: {m['finding']}" for a, m in metrics.items() if a in ARGUMENTS),
+        "; ".join(f"{a}: {m['finding']}" for a, m in metrics.items() if a in DRIVE_ARGUMENTS),
     )
     log_to_mlflow(cfg, metrics)
     return metrics
@@ -121,9 +120,7 @@ def log_to_mlflow(cfg: DictConfig, metrics: dict) -> None:
             return
         import mlflow
 
-        from offroad_path.report.rendering import ARGUMENTS
-
-        logged = flatten({a: m for a, m in metrics.items() if a in (*ARGUMENTS, "primaries")})
+        logged = flatten({a: m for a, m in metrics.items() if a in (*DRIVE_ARGUMENTS, "primaries")})
         numbers = {k: v for k, v in logged.items() if isinstance(v, int | float)}
         mlflow.log_metrics({k.replace("+", "_"): v for k, v in numbers.items() if v == v})  # NaN is not a metric
         mlflow.log_artifacts(cfg.drive.out_dir)

@@ -107,13 +107,14 @@ def evaluate(cfg: DictConfig) -> list[Record]:
 def check_primaries(e: DictConfig) -> None:
     """Each primary names a comparison that can exist (before any work); one this run does not make
     (evaluate.runs without its runs) is reported as not measured."""
+    from offroad_path.config.evaluate_schema import PRIMARY_SECTIONS
     from offroad_path.evaluate.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
     from offroad_path.statistics.primaries import check_declared
 
     pairs = comparisons(list(e.runs))
     scratch = {EVERY_SCRATCH_VS_PRIOR} if any(key.endswith("_vs_mean_path_prior") for key, *_ in pairs) else set()
     keys = {"uncertainty": {key for key, *_ in pairs} | scratch, "steering_from_paths": {f"{run}_vs_pilotnet" for run in e.runs}}
-    for name in check_declared(e.conclusions.primaries, keys):
+    for name in check_declared(e.conclusions.primaries, keys, PRIMARY_SECTIONS):
         refuse_unmakeable(name, e.conclusions.primaries[name].compare)
         log.warning("primary %s (%s) is not among this run's comparisons: not measured", name, e.conclusions.primaries[name].compare)
 

@@ -27,10 +27,11 @@ from offroad_path.data.labels import LabelledSequence, read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
 from offroad_path.evaluate.pixel_scores import counts, pooled
+from offroad_path.geometry.path import label_end
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
 from offroad_path.inference.temporal_filter import TemporalFilter, warp_previous
 from offroad_path.report.tables import TemporalRow, method_title
-from offroad_path.sequence.footprint import Occlusion, footprint_depth, footprint_for, path_mask, swept_polygons
+from offroad_path.sequence.footprint import Occlusion, footprint_for, path_label
 from offroad_path.statistics.bootstrap import Resampling, block_sums, paired_interval
 from offroad_path.statistics.scores import iou
 
@@ -50,10 +51,9 @@ class Block:
 
 
 def last_labellable(poses: np.ndarray, distance_m: float) -> int:
-    """The last frame with a frame farther than distance_m after it (-1: none)."""
+    """The last frame a label of distance_m can be made at (label_end's rule; -1: none)."""
     positions = poses[:, :3, 3]
-    ahead = [np.any(np.linalg.norm(positions[f + 1 :] - positions[f], axis=1) > distance_m) for f in range(len(positions))]
-    return int(np.flatnonzero(ahead)[-1]) if any(ahead) else -1
+    return next((f for f in range(len(positions) - 1, -1, -1) if label_end(positions, f, distance_m) is not None), -1)
 
 
 def held_out_blocks(samples: list[Sample], labels_dir: Path, block_m: float, distance_m: float) -> list[Block] | None:
@@ -76,18 +76,18 @@ def held_out_blocks(samples: list[Sample], labels_dir: Path, block_m: float, dis
 def load_block(block: Block, label: DictConfig) -> None:
     """Images, exact labels, stereo and true depth of every frame of `block` (label: the label stage's settings)."""
     seq = block.run.sequence
-    footprint, K, size = footprint_for(seq, label.footprint), seq.calibration.K, seq.image_size
+    footprint = footprint_for(seq, label.footprint)
     positions = seq.poses[:, :3, 3]
     matcher = sgbm(label.disparity)
     labels = []
     for f in block.frames:
-        beyond = np.flatnonzero(np.linalg.norm(positions[f + 1 :] - positions[f], axis=1) > label.distance_m)
-        if len(beyond) == 0:
+        fn = label_end(positions, f, label.distance_m)
+        if fn is None:
             raise ValueError(f"{seq.root}: frame {f} has no frame {label.distance_m:g} m ahead to label it with")
         true_depth = seq.load_depth(f)
         o = label.occlusion
         occlusion = Occlusion(true_depth, o.margin_m, o.margin_rel) if o.enabled else None
-        labels.append(path_mask(footprint_depth(swept_polygons(seq.poses, f, f + 1 + int(beyond[0]), footprint), K, size), occlusion) > 0)
+        labels.append(path_label(seq, seq.poses, (f, fn), footprint, occlusion) > 0)
         disparity = compute_disparity(matcher, seq.load_left(f, grey=True), seq.load_right(f, grey=True))
         block.stereo_depth.append(depth_from_disparity(disparity, seq.calibration.fx, seq.calibration.baseline_m))
         block.true_depth.append(true_depth)

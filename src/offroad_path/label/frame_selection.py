@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from offroad_path.config.label_schema import FRAME_STRATEGIES
-from offroad_path.geometry.path import distance_along
+from offroad_path.geometry.path import distance_along, label_end
 
 STRATEGIES = FRAME_STRATEGIES
 
@@ -35,10 +35,9 @@ def select_segments(
     segments = []
     f0 = start = int(moving[0])
     while f0 < len(positions) - 1:
-        beyond = np.flatnonzero(np.linalg.norm(positions[f0 + 1 :] - positions[f0], axis=1) > distance_m)
-        if len(beyond) == 0:
+        fn = label_end(positions, f0, distance_m)
+        if fn is None:
             break
-        fn = f0 + 1 + int(beyond[0])
         segments.append((f0, fn))
         if strategy == "midway":
             f0 = max((f0 + fn) // 2, f0 + 1)

@@ -21,7 +21,7 @@ from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity
 from offroad_path.label.frame_selection import select_segments
 from offroad_path.odometry.sequence_trajectory import OdometryRun, drift, run_odometry
 from offroad_path.odometry.steps import FALLBACKS
-from offroad_path.sequence.footprint import Occlusion, footprint_depth, footprint_for, path_mask, swept_polygons
+from offroad_path.sequence.footprint import Occlusion, VehicleFootprint, footprint_for, path_label
 from offroad_path.sequence.poses import max_steps, poses_to_text, read_poses
 from offroad_path.sequence.reader import Sequence, open_sequence
 from offroad_path.utils.media import write_image
@@ -101,7 +101,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
             f0, fn, float(travelled[fn] - travelled[f0]), float(np.linalg.norm(positions[fn] - positions[f0])), None, None, True, "", 0
         )
         if run is None or odometry_holds(run, report):
-            label_segment(seq, report, swept_polygons(poses, f0, fn, footprint), cfg, out_dir)
+            label_segment(seq, report, poses, footprint, cfg, out_dir)
         reports.append(report)
 
     _write_csv(out_dir / "report.csv", [asdict(r) for r in reports], [f.name for f in fields(SegmentReport)])
@@ -136,7 +136,7 @@ def label_sequence(seq: Sequence, cfg, out_dir: Path) -> dict:
     return summary
 
 
-def label_segment(seq: Sequence, report: SegmentReport, polygons: list[np.ndarray], cfg, out_dir: Path) -> None:
+def label_segment(seq: Sequence, report: SegmentReport, poses: np.ndarray, footprint: VehicleFootprint, cfg, out_dir: Path) -> None:  # noqa: PLR0913, PLR0917
     """Write the segment's label (and f0's disparity, with stereo) into out_dir; fill the report's
     label pixels, or drop it when the footprint falls outside the image. One camera: no disparity,
     no occlusion (the label stage's log says so once)."""
@@ -149,7 +149,7 @@ def label_segment(seq: Sequence, report: SegmentReport, polygons: list[np.ndarra
         if occlusion_cfg.enabled and disparity is not None
         else None
     )
-    mask = path_mask(footprint_depth(polygons, seq.calibration.K, seq.image_size), occlusion)
+    mask = path_label(seq, poses, (f0, report.fn), footprint, occlusion)
     report.label_pixels = int(np.count_nonzero(mask))
     if report.label_pixels == 0:
         report.kept, report.reason = False, "the footprint falls outside the image"

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
+from offroad_path.config.training_schema import BATCH_NORM_CHOICE
 from offroad_path.models.base import SegmentationNet
 from offroad_path.models.fcn import FCN8s
 from offroad_path.models.segnet import SegNet
 from offroad_path.models.unet import UNet
 
 MODELS: dict[str, type[SegmentationNet]] = {"segnet": SegNet, "fcn": FCN8s, "unet": UNet}
-# Networks whose normalisation is a choice (model.batch_norm): FCN-8s has none as published. SegNet
-# and U-Net have batch norm after every convolution as published, which is theirs to keep.
-BATCH_NORM_CHOICE = ("fcn",)
 
 
 def build_model(name: str, num_classes: int = 2, width: float = 1.0, batch_norm: bool | None = None) -> SegmentationNet:

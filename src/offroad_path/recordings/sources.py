@@ -207,7 +207,25 @@ class VideoSource:
         self.correlation = None
         if self.offset is None:
             self.offset, self.correlation = self._estimate_offset()
+        self._check_pairing()
         self.pairs_seen = 0
+
+    def _check_pairing(self) -> None:
+        """The frames either video holds that the other has none for, at the offset, are unpaired: more
+        than ingest.max_unpaired_fraction of both videos' frames is refused before any work, as a bag's
+        unpaired images are (a container that declares no frame count is checked as it decodes)."""
+        left, right = self.left.frames, self.right.frames
+        if left <= 0 or right <= 0:
+            return
+        pairs = max(0, min(left - max(0, -self.offset), right - max(0, self.offset)))
+        unpaired = left + right - 2 * pairs
+        if unpaired > self.c.max_unpaired_fraction * (left + right):
+            raise InputError(
+                self.path,
+                f"{unpaired} of {left + right} frames have no partner at an offset of {self.offset} frames ({left} frames in "
+                f"{self.left.path.name}, {right} in {self.path.name}): more than ingest.max_unpaired_fraction = "
+                f"{self.c.max_unpaired_fraction:g}; the videos do not cover the same drive",
+            )
 
     def _estimate_offset(self) -> tuple[int, float]:
         limit = self.c.videos.max_offset_frames

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from math import nan
 
+from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS
 from offroad_path.report.tables import (
     EVERY_SCRATCH_VS_PRIOR,
     PP_KEY,
@@ -300,11 +301,7 @@ def _stress_cell(entry: dict) -> str:
     return f"{entry['iou']:.3f}, {Interval(entry['minus_prior'], entry['low'], entry['high']).difference_text()}"
 
 
-ARGUMENTS = {
-    "steering": "(a) closed loop: does predicting the path drive better than predicting the steering?",
-    "vehicle": "(b) another vehicle: the same networks on a vehicle with 1.5 x the wheelbase, another lock and a higher camera",
-    "traction": "(c) traction: the same networks on ground where the vehicle turns less than the bicycle model says (world.slip)",
-}
+ARGUMENTS = DRIVE_ARGUMENTS  # the drive's arguments and their questions (conf: drive.arguments)
 
 
 def _interval_of(entry: dict) -> Interval:

@@ -163,3 +163,13 @@ def path_mask(footprint_z: np.ndarray, occlusion: Occlusion | None = None) -> np
         hidden = (measured > 0) & (footprint_z > measured * (1 + occlusion.margin_rel) + occlusion.margin_m)
         path &= ~hidden
     return np.where(path, 255, 0).astype(np.uint8)
+
+
+def path_label(
+    seq: Sequence, poses: np.ndarray, segment: tuple[int, int], footprint: VehicleFootprint, occlusion: Occlusion | None = None
+) -> np.ndarray:
+    """The path label of frame f0 of `seq` (H, W) uint8 0/255, segment = (f0, fn): the ground the vehicle
+    covers over frames f0+1..fn by `poses` (estimated or true), swept and projected into f0's image,
+    less what `occlusion` hides. The label stage's labels and the temporal scores' exact ones are both this."""
+    f0, fn = segment
+    return path_mask(footprint_depth(swept_polygons(poses, f0, fn, footprint), seq.calibration.K, seq.image_size), occlusion)

@@ -21,6 +21,7 @@ from offroad_path.sequence.calibration import StereoCalibration, read_calibratio
 from offroad_path.sequence.poses import read_poses
 
 MAX_IMAGE_PIXELS = 50_000_000  # default cap on an image's declared size (8K is 33 million)
+MIN_IMAGE_SIDE = 32  # pixels: the networks' coarsest features are 32 pixels apart; a smaller image is no camera's view
 # (left folder, right folder, calib keys) in order of preference; None keys: two unkeyed rows.
 LAYOUTS = (("image_l", "image_r", None), ("image_2", "image_3", ("P2", "P3")), ("image_0", "image_1", ("P0", "P1")))
 
@@ -190,9 +191,12 @@ def _stereo_pairs(left_dir: Path, right_dir: Path) -> tuple[list[Path], list[Pat
 
 
 def check_pixels(path: Path, width: int, height: int, max_pixels: int = MAX_IMAGE_PIXELS) -> None:
-    """Refuse, from its header, an image too large to decode safely (a decompression bomb)."""
+    """Refuse, from its header, an image too large to decode safely (a decompression bomb), or too
+    small to be a camera's view of the ground ahead (under MIN_IMAGE_SIDE pixels on a side)."""
     if width * height > max_pixels:
         raise InputError(path, f"declares {width}x{height} pixels, more than the {max_pixels:,} allowed; it is not decoded")
+    if min(width, height) < MIN_IMAGE_SIDE:
+        raise InputError(path, f"is {width}x{height} pixels: a camera image has at least {MIN_IMAGE_SIDE} on each side")
 
 
 def _common_size(paths: list[Path]) -> tuple[int, int]:

@@ -114,14 +114,13 @@ def owned(declared: Mapping, sections: tuple[str, ...]) -> dict[str, tuple[str, 
     return found
 
 
-# The sections a primary's compare can name: evaluate's and the drive's arguments (drive.closed_loop.ARGUMENTS).
-SECTIONS = ("uncertainty", "steering_from_paths", "steering", "vehicle", "traction")
-
-
-def check_declared(declared: Mapping, available: Mapping[str, set[str]], where: str = "evaluate.conclusions.primaries") -> list[str]:
-    """Before any work: InputError naming a primary whose compare names no known section or is not
-    <section>/<a>_vs_<b>; returns the primaries this stage owns (available: section -> the
-    comparison keys this run makes) but does not make, which its report gives as not measured."""
+def check_declared(
+    declared: Mapping, available: Mapping[str, set[str]], sections: tuple[str, ...], where: str = "evaluate.conclusions.primaries"
+) -> list[str]:
+    """Before any work: InputError naming a primary whose compare names none of `sections` (every
+    stage's that reports primaries: the caller's config knows them) or is not <section>/<a>_vs_<b>;
+    returns the primaries this stage owns (available: section -> the comparison keys this run
+    makes) but does not make, which its report gives as not measured."""
     missing = []
     for name, q in declared.items():
         smallest = q.get("smallest_effect")
@@ -130,9 +129,9 @@ def check_declared(declared: Mapping, available: Mapping[str, set[str]], where: 
         ):
             raise InputError(f"{where}.{name}.smallest_effect", f"{smallest!r} must be a number > 0 (in the estimate's units) or null")
         section, _, key = str(q["compare"]).partition("/")
-        if section not in SECTIONS or "_vs_" not in key:
+        if section not in sections or "_vs_" not in key:
             raise InputError(
-                f"{where}.{name}.compare", f"{q['compare']!r} is not <section>/<a>_vs_<b> with a section of {', '.join(SECTIONS)}"
+                f"{where}.{name}.compare", f"{q['compare']!r} is not <section>/<a>_vs_<b> with a section of {', '.join(sections)}"
             )
         if section in available and key not in available[section]:
             missing.append(name)

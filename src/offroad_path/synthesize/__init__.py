@@ -19,7 +19,7 @@ from offroad_path.utils.outputs import Outputs
 from offroad_path.utils.tracking import flatten, stage_run
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.held_out import choose_held_out_worlds
-from offroad_path.world.record import record_sequences, sequence_seed
+from offroad_path.world.record import Drive, record_sequences, sequence_seed
 
 
 def outputs(cfg: DictConfig) -> Outputs:
@@ -32,8 +32,8 @@ def synthesize(cfg: DictConfig) -> list[dict]:
     with stage_run(cfg, "synthesize") as run, atomic_directory(out_dir, "synthesize", key="synthesize.out_dir") as tmp:
         synthesize_cfg = cfg.synthesize
         held_out = choose_held_out_worlds(cfg.world, synthesize_cfg.test_worlds, synthesize_cfg.seed, synthesize_cfg.workers)
-        drives = [(f"seq_{i:03d}", sequence_seed(synthesize_cfg.seed, i), False) for i in range(synthesize_cfg.sequences)]
-        drives += [(w.name, w.seed, True, w.draw, w.test_set) for w in held_out]
+        drives = [Drive(f"seq_{i:03d}", sequence_seed(synthesize_cfg.seed, i)) for i in range(synthesize_cfg.sequences)]
+        drives += [Drive(w.name, w.seed, w.test_set, w.draw) for w in held_out]
         summaries = record_sequences(cfg.world, drives, tmp, synthesize_cfg.workers, cfg.render)
         tested = [
             {"name": w.name, "test_set": w.test_set, "blocks": w.blocks, "condition_groups": list(w.groups), "look_draw": w.draw}

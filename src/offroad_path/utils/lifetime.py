@@ -18,7 +18,7 @@ from pathlib import Path
 POLL_S = 0.5  # how soon after DVC a stage stops
 
 
-def _started(pid: int) -> tuple[int, int] | None:
+def process_started(pid: int) -> tuple[int, int] | None:
     """(parent pid, start time in clock ticks) of a live process; None when it is gone or a zombie.
     The start time tells the process from a later one given the same pid."""
     try:
@@ -35,7 +35,7 @@ def dvc_ancestor(start: int | None = None) -> tuple[int, int] | None:
         return None
     pid = os.getppid() if start is None else start
     for _ in range(8):  # DVC, a shell or two, a `timeout`: never deep
-        found = _started(pid)
+        found = process_started(pid)
         try:
             environ = Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
         except OSError:
@@ -56,7 +56,7 @@ def end_with_dvc() -> None:
     pid, started = ancestor
 
     def watch() -> None:
-        while (found := _started(pid)) is not None and found[1] == started:
+        while (found := process_started(pid)) is not None and found[1] == started:
             threading.Event().wait(POLL_S)
         os.kill(os.getpid(), signal.SIGTERM)
 

@@ -123,6 +123,21 @@ def accelerator() -> dict:
     return {"rule": Rule(lambda v: v == "auto" or (v in ACCELERATORS and has_device(ACCELERATORS[v])), says)}
 
 
+def ordered_pair(low: float, high: float, low_open: bool = False) -> dict:
+    """[a, b], two finite numbers with low <= a <= b <= high (low < a when low_open)."""
+
+    def test(v: Any) -> bool:
+        return len(v) == 2 and all(_number(x) for x in v) and (low < v[0] if low_open else low <= v[0]) and v[0] <= v[1] <= high
+
+    bound = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+    return {"rule": Rule(test, f"must be [low, high], two finite numbers in {bound} with low <= high")}
+
+
+# A seed: what NumPy's SeedSequence and Lightning's seed_everything take (a negative one is refused or redrawn).
+SEED = rule(lambda v: 0 <= v <= 2**32 - 1, "must be a whole number in [0, 4294967295]")
+FINITE = rule(lambda v: True, "must be a finite number")
+
+
 def numbers(count: int) -> dict:
     """A list of exactly `count` finite numbers."""
     return {"rule": Rule(lambda v: len(v) == count and all(_number(x) for x in v), f"must be a list of {count} finite numbers")}

@@ -13,7 +13,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from offroad_path.utils.lifetime import dvc_ancestor
+from offroad_path.utils.lifetime import dvc_ancestor, process_started
 
 # The experiment's kind: model training (runs, models, metrics), not GenAI development (traces).
 # MLflow 3.17's UI opens experiments by its sidebar switch instead (?workflowType=machine_learning,
@@ -91,13 +91,14 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
 
     mlflow.set_tracking_uri(tracking_uri(cfg.mlflow))
     experiment = experiment_id(cfg.mlflow)
+    end_abandoned_runs(tracking_uri(cfg.mlflow), experiment)
     parent = pipeline_parent(cfg)
     with stop_deferred():  # a stop that lands while MLflow makes the run must find it among the open runs
         started = mlflow.start_run(experiment_id=experiment, run_name=stage, tags={"mlflow.parentRunId": parent} if parent else None)
         OPEN_RUNS[started.info.run_id] = tracking_uri(cfg.mlflow)
     with started as run:
         try:
-            mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
+            mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name, PROCESS_TAG: process_key(os.getpid())})
             mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
             yield run
         finally:
@@ -146,6 +147,39 @@ def multirun_parent(cfg: DictConfig) -> str | None:
     parent = client.create_run(experiment, run_name=f"sweep {Path(sweep).name}", tags={"sweep_dir": sweep, "stage": "sweep"})
     client.set_terminated(parent.info.run_id)
     return parent.info.run_id
+
+
+PROCESS_TAG = "process"  # a stage run's `<host>-<pid>-<start>`: a run left RUNNING by a process now gone was killed
+
+
+def process_key(pid: int) -> str | None:
+    """`<host>-<pid>-<start>` of a live process (the start time tells it from a later one of the same pid)."""
+    found = process_started(pid)
+    return None if found is None else f"{os.uname().nodename}-{pid}-{found[1]}"
+
+
+def _gone(key: str | None) -> bool:
+    """Whether the process a key names ran on this host and no longer runs."""
+    parts = (key or "").rsplit("-", 2)
+    if len(parts) != 3 or parts[0] != os.uname().nodename or not parts[1].isdigit():
+        return False
+    return process_key(int(parts[1])) != key
+
+
+def end_abandoned_runs(uri: str, experiment: str) -> None:
+    """A process killed outright (SIGKILL, the machine's OOM killer) cannot end its run: its stage's run
+    stays RUNNING, and the `dvc repro` parent its last finished stage ended FINISHED. The next stage
+    that logs ends each such run of this host KILLED, and its repro parent too."""
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(uri)
+    now = int(time.time() * 1000)
+    for run in client.search_runs([experiment], filter_string="attributes.status = 'RUNNING'", max_results=1000):
+        if _gone(run.data.tags.get(PROCESS_TAG)):
+            client.set_terminated(run.info.run_id, "KILLED", end_time=now)
+            parent = run.data.tags.get("mlflow.parentRunId")
+            if parent and client.get_run(parent).data.tags.get("stage") == "dvc repro":
+                client.set_terminated(parent, "KILLED", end_time=now)
 
 
 def dvc_repro_process() -> str | None:

@@ -7,7 +7,7 @@ import logging
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -174,13 +174,23 @@ def _record_job(args: tuple[WorldConfig, int, str, str | None, str, Any]) -> dic
     return record_sequence(cfg, seed, Path(out_dir), test_set, draw, render=render)
 
 
-def record_sequences(cfg: WorldConfig, drives: list[tuple], out_dir: Path, workers: int = 0, render: Any = None) -> list[dict]:
-    """Render each drive (name, seed, held out[, look draw[, test set]]) into out_dir/<name> in parallel, one process per
-    worker, with `render` (conf/render; None: the NumPy reference)."""
-    jobs = [(cfg, d[1], str(out_dir / d[0]), (d[4] if len(d) > 4 else "main") if d[2] else None, d[3] if len(d) > 3 else "training", render)
-            for d in drives]  # fmt: skip
+@dataclass(frozen=True)
+class Drive:
+    """One world to render: its folder name and seed; test_set: the held-out set it belongs to (None: a
+    training drive); draw: how its look was drawn (offroad_path.world.held_out)."""
+
+    name: str
+    seed: int
+    test_set: str | None = None
+    draw: str = "training"
+
+
+def record_sequences(cfg: WorldConfig, drives: list[Drive], out_dir: Path, workers: int = 0, render: Any = None) -> list[dict]:
+    """Render each drive into out_dir/<name> in parallel, one process per worker, with `render`
+    (conf/render; None: the NumPy reference)."""
+    jobs = [(cfg, d.seed, str(out_dir / d.name), d.test_set, d.draw, render) for d in drives]
     start = time.perf_counter()
-    summaries = map_processes(_record_job, jobs, workers, [f"sequence {drive[0]}" for drive in drives], "render")
+    summaries = map_processes(_record_job, jobs, workers, [f"sequence {drive.name}" for drive in drives], "render")
     elapsed = time.perf_counter() - start
     frames = sum(s["frames"] for s in summaries)
     log.info("rendered %d sequences, %d stereo frames in %.1f s: %.2f stereo frames/s", len(drives), frames, elapsed, frames / elapsed)

@@ -19,8 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS, PRIMARY_SECTIONS
 from offroad_path.drive.loop import DriveLog
-from offroad_path.report.rendering import ARGUMENTS, argument_markdown
+from offroad_path.report.rendering import argument_markdown
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, drawn, paired_draws, whole
 from offroad_path.statistics.counts import compare_rates, power_sentence, rate_interval, route_needed
 from offroad_path.statistics.primaries import check_declared, holm_levels, owned, recorded
@@ -195,7 +196,7 @@ def report(logs: dict[str, dict[str, list[DriveLog]]], d, worlds: list[str], con
         f"more than {d.corridor_m:g} m from every centre line (track, forks, reference drive), or into an object{water}.\n"
     ]
     metrics: dict = {}
-    mine = owned(conclusions.primaries, tuple(ARGUMENTS))
+    mine = owned(conclusions.primaries, tuple(DRIVE_ARGUMENTS))
     primaries: dict[str, dict] = {}
     for argument, by_policy in logs.items():
         scores = [score(group, d.intervention_s, resampling) for group in by_policy.values()]
@@ -237,4 +238,4 @@ def check_arguments_primaries(conclusions, d) -> list[str]:
     """Before any drive: the primaries are well formed; returns those naming an argument that this
     drive does not answer (its policies not driven), which are not measured."""
     available = {argument: {f"{a}_vs_{b}" for a in names for b in names if a != b} for argument, names in d.arguments.items()}
-    return check_declared(conclusions.primaries, {a: available.get(a, set()) for a in ARGUMENTS})
+    return check_declared(conclusions.primaries, {a: available.get(a, set()) for a in DRIVE_ARGUMENTS}, PRIMARY_SECTIONS)
