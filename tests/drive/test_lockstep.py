@@ -17,6 +17,7 @@ from offroad_path.drive.worlds import stereo_rig
 from offroad_path.geometry.stereo import sgbm
 from offroad_path.world.render import PinholeCamera
 from offroad_path.world.render_torch import torch_device
+from offroad_path.world.renderer import Renderer
 from offroad_path.world.scene import build_world
 from offroad_path.world.trajectory import VehicleGeometry
 
@@ -66,7 +67,7 @@ def world_and_rig(compose_config):
     world = build_world(cfg, seed=23)
     geometry = VehicleGeometry.of(cfg.vehicle)
     camera = PinholeCamera.from_fov(64, 36, cfg.hfov_deg)
-    rig = CountingRig(world, camera, cfg.rig.baseline_m, cfg.max_distance_m, sgbm(compose_config().label.disparity))
+    rig = CountingRig(Renderer(world, camera, cfg.max_distance_m), cfg.rig.baseline_m, sgbm(compose_config().label.disparity))
     course = Course(world, geometry, 2.5, (0.25, 2.0))
     return cfg, world, rig, Setup(course, Vehicle(geometry, 60.0), rig, SETTINGS)
 
@@ -100,7 +101,7 @@ def test_the_rig_renders_with_the_torch_port_in_batches(compose_config, world_an
     cfg, world, rig, _ = world_and_rig
     config = compose_config("render.backend=torch", "render.views_per_batch=2")
     ported = stereo_rig(world, rig.camera, cfg, config.label.disparity, config.render)
-    assert ported.device_world.device == torch_device("auto") and ported.views_per_batch == 2
+    assert ported.renderer.device_world.device == torch_device("auto") and ported.renderer.views_per_batch == 2
     poses = list(world.poses[[2, 6, 10]])
     reference = np.stack(StereoRig.render_many(rig, poses)).astype(int)
     images = ported.render_many(poses)  # in two batches: 2 views, then 1

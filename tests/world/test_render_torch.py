@@ -76,3 +76,61 @@ def test_synthesize_writes_the_same_sequence_with_either_renderer(compose_config
             assert (difference > 0).mean() < 1e-3, file
         else:  # after noise and compression: a JPEG-like block may round a level the other way
             assert difference.mean() < 0.05 and difference.max() <= 10, file
+
+
+def _resolve(dotted: str):
+    """world.<module>.<name>[.<name>] of a PORTS entry ("render._detail", "terrain.Grid.coords")."""
+    import importlib
+
+    module, *names = dotted.split(".")
+    found = importlib.import_module(f"offroad_path.world.{module}")
+    for name in names:
+        found = getattr(found, name)
+    return found
+
+
+def test_every_port_and_its_reference_name_each_other():
+    """render_torch.PORTS pairs each torch function with the reference it follows step by step: both
+    exist, each docstring names the other (a fix to the reference is seen to be owed to its port),
+    and every function of the port modules that follows a reference is in the table."""
+    import importlib
+    import inspect
+
+    from offroad_path.world.render_torch import PORTS
+
+    for reference, port in PORTS:
+        assert f"world.{port}" in inspect.getdoc(_resolve(reference)), f"{reference}'s docstring does not name its port {port}"
+        assert reference.split(".", 1)[1] in inspect.getdoc(_resolve(port)), f"{port}'s docstring does not name {reference}"
+    listed = {port for _, port in PORTS}
+    for module in ("trace_torch", "shading_torch", "render_torch"):
+        found = importlib.import_module(f"offroad_path.world.{module}")
+        for name, value in vars(found).items():
+            if (inspect.isfunction(value) or inspect.isclass(value)) and value.__module__ == found.__name__:
+                doc = inspect.getdoc(value) or ""
+                follows = any(f"{ref}." in doc for ref in ("render", "sensor", "terrain", "objects", "kernels"))
+                assert not follows or f"{module}.{name}" in listed, f"{module}.{name} follows a reference but is not in PORTS"
+
+
+def test_no_number_is_written_in_both_the_reference_and_its_port():
+    """The port imports the reference's constants (texture scales, sky, auto gain, the march): a
+    number written twice drifts when one copy is tuned. Allowed: the arithmetic's own (0, 1, 2, 3,
+    -1, 0.5), parameter slices of an object's row (5, 6), a bit shift (20) and the 8-bit maximum."""
+    import ast
+
+    from helpers import ROOT
+
+    structural = {0, 1, 2, 3, -1, 0.5, 5, 6, 20, 255}
+
+    def numbers(names: tuple[str, ...]) -> dict[float, list[str]]:
+        out: dict[float, list[str]] = {}
+        for name in names:
+            path = ROOT / "src" / "offroad_path" / "world" / f"{name}.py"
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Constant) and type(node.value) in (int, float) and node.value not in structural:
+                    out.setdefault(node.value, []).append(f"{name}.py:{node.lineno}")
+        return out
+
+    references = numbers(("render", "objects", "sensor", "terrain", "kernels"))
+    ports = numbers(("render_torch", "shading_torch", "trace_torch"))
+    twice = {value: ports[value] for value in set(references) & set(ports)}
+    assert not twice, f"numbers written in a port and its reference (import the reference's constant): {twice}"

@@ -32,43 +32,34 @@ from offroad_path.inference.runners import PathModel
 from offroad_path.inference.temporal_filter import TemporalFilter
 from offroad_path.steering.angle_dataset import steering_transforms
 from offroad_path.steering.pure_pursuit import GroundCamera, pure_pursuit, steering_from_path
-from offroad_path.world.render import PinholeCamera, render_view
+from offroad_path.world.render import PinholeCamera
+from offroad_path.world.renderer import Renderer
 from offroad_path.world.trajectory import camera_poses_at
 
 
 @dataclass
 class StereoRig:
-    """The driven vehicle's stereo rig in one world: renders views at poses, matches a pair. With a
-    device world (world.render_torch.DeviceWorld) it renders with the torch port there,
-    views_per_batch at once; without, with the reference (world.render), one at a time."""
+    """The driven vehicle's stereo rig in one world: renders views at poses through conf/render's
+    renderer (world.renderer: the reference one view at a time, or the torch port in batches), matches a pair."""
 
-    world: object
-    camera: PinholeCamera
+    renderer: Renderer
     baseline_m: float
-    max_distance_m: float
     matcher: cv2.StereoSGBM
-    device_world: object | None = None
-    views_per_batch: int = 32
 
     def __post_init__(self) -> None:
-        self.rays = self.camera.rays()
         self.to_right = np.eye(4)
         self.to_right[0, 3] = self.baseline_m
+
+    @property
+    def camera(self) -> PinholeCamera:
+        return self.renderer.camera
 
     def render(self, pose: np.ndarray) -> np.ndarray:
         return self.render_many([pose])[0]
 
     def render_many(self, poses: list[np.ndarray]) -> list[np.ndarray]:
         """(H, W, 3) RGB images, one per camera-to-world pose (4, 4)."""
-        if self.device_world is None:
-            return [render_view(self.world, self.camera, pose, self.max_distance_m, self.rays).image for pose in poses]
-        from offroad_path.world.render_torch import render_views
-
-        images: list[np.ndarray] = []
-        for i in range(0, len(poses), self.views_per_batch):
-            batch = np.stack(poses[i : i + self.views_per_batch])
-            images += [view.image for view in render_views(self.device_world, self.camera, batch, self.max_distance_m)]
-        return images
+        return [view.image for view in self.renderer.views(poses)]
 
 
 LEFT, RIGHT = "left", "right"

@@ -28,6 +28,7 @@ from offroad_path.utils.rules import ConfigValueError
 from offroad_path.world.record import check_rendered_with, rebuild_world
 from offroad_path.world.render import PinholeCamera
 from offroad_path.world.render_torch import torch_device
+from offroad_path.world.renderer import Renderer
 from offroad_path.world.scene import World
 from offroad_path.world.slip import SLIP_STREAM, Slip, make_slip
 from offroad_path.world.trajectory import VehicleGeometry
@@ -184,14 +185,8 @@ def drive_world(job: WorldJob) -> list[tuple[str, DriveLog]]:
 
 def stereo_rig(world: World, camera: PinholeCamera, world_cfg, disparity, render) -> StereoRig:
     """The driven vehicle's rig (the world's baseline and range, label.disparity's matcher), rendering
-    with conf/render's backend: the torch port on its device, views_per_batch at once, or the reference."""
-    device_world = None
-    if render.backend == "torch":
-        from offroad_path.world.render_torch import DeviceWorld
-
-        device_world = DeviceWorld(world, torch_device(render.device))
-    baseline, max_distance = world_cfg.rig.baseline_m, world_cfg.max_distance_m
-    return StereoRig(world, camera, baseline, max_distance, sgbm(disparity), device_world, render.views_per_batch)
+    through conf/render's renderer (world.renderer)."""
+    return StereoRig(Renderer(world, camera, world_cfg.max_distance_m, render), world_cfg.rig.baseline_m, sgbm(disparity))
 
 
 def _slip(world: World, job: WorldJob) -> Slip:

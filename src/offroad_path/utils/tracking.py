@@ -94,11 +94,12 @@ def stage_run(cfg: DictConfig, stage: str) -> Iterator[Any]:
     end_abandoned_runs(tracking_uri(cfg.mlflow), experiment)
     parent = pipeline_parent(cfg)
     with stop_deferred():  # a stop that lands while MLflow makes the run must find it among the open runs
-        started = mlflow.start_run(experiment_id=experiment, run_name=stage, tags={"mlflow.parentRunId": parent} if parent else None)
+        tags = {PROCESS_TAG: process_key(os.getpid())} | ({"mlflow.parentRunId": parent} if parent else {})  # a kill right after finds it
+        started = mlflow.start_run(experiment_id=experiment, run_name=stage, tags=tags)
         OPEN_RUNS[started.info.run_id] = tracking_uri(cfg.mlflow)
     with started as run:
         try:
-            mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name, PROCESS_TAG: process_key(os.getpid())})
+            mlflow.set_tags({"stage": stage, "experiment_name": cfg.experiment_name})
             mlflow.log_params(flatten(OmegaConf.to_container(cfg[stage], resolve=True)))
             yield run
         finally:

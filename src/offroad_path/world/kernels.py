@@ -97,7 +97,9 @@ def resize_cubic(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 def sample_bilinear(image: np.ndarray, mx: np.ndarray, my: np.ndarray, wrap: bool = False) -> np.ndarray:
     """Bilinear values (N,) or (N, channels) of a float `image` at fractional pixels (mx, my), in
-    float32; outside the image: its border replicated, or the image tiled (wrap)."""
+    float32; outside the image: its border replicated, or the image tiled (wrap).
+    Port: world.trace_torch.bilinear (render_torch.PORTS).
+    """
     n = len(mx)
     rows, cols = image.shape[:2]
     flat = image.reshape(rows * cols, -1)

@@ -89,7 +89,9 @@ class Objects:
 
 
 def intersect(kind: int, p: np.ndarray, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Depth t (M,) and normals (M, 3) of rays o + t*d[i] against objects p[i] of one kind."""
+    """Depth t (M,) and normals (M, 3) of rays o + t*d[i] against objects p[i] of one kind.
+    Port: world.trace_torch.intersect (render_torch.PORTS).
+    """
     return (_sphere, _cylinder, _box)[kind](p[:, : PARAM_COUNT[kind]], o, d)
 
 

@@ -27,7 +27,8 @@ from offroad_path.utils.media import write_image
 from offroad_path.utils.parallel import map_processes
 from offroad_path.world.classes import CLASS_NAMES
 from offroad_path.world.conditions import conditions_csv, frame_conditions
-from offroad_path.world.render import PinholeCamera, View, render_view
+from offroad_path.world.render import PinholeCamera, View
+from offroad_path.world.renderer import Renderer
 from offroad_path.world.scene import World, build_world
 
 log = logging.getLogger(__name__)
@@ -132,31 +133,21 @@ def record_sequence(  # noqa: PLR0913
 
 
 def stereo_views(world: World, camera: PinholeCamera, cfg: WorldConfig, seed: int, render: Any = None) -> Iterator[tuple[View, View]]:
-    """Each frame's (left, right) views of the drive, in order: frame k's noise from (seed, k, camera).
-    render.backend torch renders render.views_per_batch views at once on render.device."""
+    """Each frame's (left, right) views of the drive, in order: frame k's noise from (seed, k, camera),
+    rendered through conf/render's renderer (world.renderer)."""
     to_right = np.eye(4)
     to_right[0, 3] = cfg.rig.baseline_m  # the right camera sits at +B along the left camera's x axis
     left_poses = world.poses
     right_poses = matmul(left_poses, to_right[None])
     shutter_m = _shutter_metres(world, cfg.fps)
-    if render is None or render.backend == "numpy":
-        rays = camera.rays()
-        for k in range(len(left_poses)):
-            yield (
-                render_view(world, camera, left_poses[k], cfg.max_distance_m, rays, shutter_m[k], (seed, k, 0)),
-                render_view(world, camera, right_poses[k], cfg.max_distance_m, rays, shutter_m[k], (seed, k, 1)),
-            )
-        return
-    from offroad_path.world.render_torch import DeviceWorld, render_views, torch_device  # torch only for this renderer
-
-    device_world = DeviceWorld(world, torch_device(render.device))
-    per_batch = max(1, render.views_per_batch // 2)
-    for start in range(0, len(left_poses), per_batch):
-        frames = slice(start, min(start + per_batch, len(left_poses)))
+    renderer = Renderer(world, camera, cfg.max_distance_m, render)
+    per_call = max(1, renderer.views_per_batch // 2)  # frames whose two views render together (the reference: one frame)
+    for start in range(0, len(left_poses), per_call):
+        frames = slice(start, min(start + per_call, len(left_poses)))
         numbers = range(frames.start, frames.stop)
         poses = np.concatenate([left_poses[frames], right_poses[frames]])
         keys = [(seed, k, 0) for k in numbers] + [(seed, k, 1) for k in numbers]
-        views = render_views(device_world, camera, poses, cfg.max_distance_m, motion_m=np.tile(shutter_m[frames], 2), noise_keys=keys)
+        views = renderer.views(poses, np.tile(shutter_m[frames], 2), keys)
         yield from zip(views[: len(numbers)], views[len(numbers) :], strict=True)
 
 

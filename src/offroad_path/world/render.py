@@ -27,6 +27,8 @@ RELAX = 0.02  # march step at least 2 % of the distance: thinner distant bumps t
 MIN_STEP_M = 0.02
 BISECTIONS = 4
 REFINEMENTS = 8
+COMPACT_BELOW = 0.75  # the march keeps only the live rays once fewer than this share are
+MAX_TAN_ANGLE = 1.5  # radians: a sphere's pixel range is clipped short of the image plane's horizon
 # Linear light to 8-bit sRGB-like gamma 2.2; a table is much faster than a power per channel.
 GAMMA = np.clip(255.0 * np.linspace(0.0, 1.0, 16384) ** (1 / 2.2) + 0.5, 0, 255).astype(np.uint8)
 
@@ -63,7 +65,9 @@ class View:
 
 
 def march_terrain(terrain: Terrain, origin: np.ndarray, dirs: np.ndarray, max_t: float) -> np.ndarray:
-    """Depth t of the first terrain crossing for each ray o + t*d, inf where none within max_t."""
+    """Depth t of the first terrain crossing for each ray o + t*d, inf where none within max_t.
+    Port: world.trace_torch.march_terrain (render_torch.PORTS).
+    """
     # float32 throughout: half the memory traffic, and ~1e-5 m rounding at these distances.
     ox, oy, oz = (np.float32(v) for v in origin)
     dirs = dirs.astype(np.float32)
@@ -123,7 +127,7 @@ def _march(terrain: Terrain, origin: tuple, idx: np.ndarray, per_ray: list[np.nd
         t = t + step
         alive &= ~crossed & (t < limit)
         # Finished rays ride along until a quarter of the batch is dead: compaction costs a copy.
-        if alive.sum() < 0.75 * len(alive):
+        if alive.sum() < COMPACT_BELOW * len(alive):
             keep = np.flatnonzero(alive)
             idx, t, t_prev, c_prev, alive = idx[keep], t[keep], t_prev[keep], c_prev[keep], alive[keep]
             per_ray = [a[keep] for a in per_ray]
@@ -131,7 +135,9 @@ def _march(terrain: Terrain, origin: tuple, idx: np.ndarray, per_ray: list[np.nd
 
 
 def _refine(clearance, dirs: np.ndarray, lo: np.ndarray, hi: np.ndarray, c: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """The crossing t inside each bracket [lo, hi] (clearance c_lo > 0 >= c_hi) of rays `dirs`."""
+    """The crossing t inside each bracket [lo, hi] (clearance c_lo > 0 >= c_hi) of rays `dirs`.
+    Port: world.trace_torch._refine (render_torch.PORTS).
+    """
     c_lo, c_hi = c
     # A ray already below ground at NEAR_M has no bracket: report the near plane.
     below = ~np.isfinite(c_lo)
@@ -162,14 +168,15 @@ def _tangent_range(a: np.ndarray, z: np.ndarray, r: np.ndarray, f: float, c: flo
 
     A ray meets the sphere only if its projection onto the (a, z) plane meets the sphere's
     shadow there, a disc: so its angle lies between the disc's two tangents from the camera.
+    Port: world.trace_torch._tangent_range (render_torch.PORTS).
     """
     dist = np.hypot(a, z)
     with np.errstate(invalid="ignore", divide="ignore"):
         half = np.arcsin(np.clip(r / dist, 0.0, 1.0))
     centre = np.arctan2(a, z)
     lo_angle, hi_angle = centre - half, centre + half
-    lo = np.where(lo_angle <= -np.pi / 2, -np.inf, f * np.tan(np.clip(lo_angle, -1.5, 1.5)) + c)
-    hi = np.where(hi_angle >= np.pi / 2, np.inf, f * np.tan(np.clip(hi_angle, -1.5, 1.5)) + c)
+    lo = np.where(lo_angle <= -np.pi / 2, -np.inf, f * np.tan(np.clip(lo_angle, -MAX_TAN_ANGLE, MAX_TAN_ANGLE)) + c)
+    hi = np.where(hi_angle >= np.pi / 2, np.inf, f * np.tan(np.clip(hi_angle, -MAX_TAN_ANGLE, MAX_TAN_ANGLE)) + c)
     behind = (hi_angle <= -np.pi / 2) | (lo_angle >= np.pi / 2)
     surrounds = dist <= r
     lo = np.where(surrounds, -np.inf, np.where(behind, np.inf, lo))
@@ -192,6 +199,7 @@ def trace_objects(world: World, shot: Shot, t_bound: np.ndarray, max_t: float):
     Each object is tested only on the pixels of its projected bounding sphere, and only where
     nothing already found is nearer than the whole object; all (pixel, object) pairs of one kind
     go through its intersection function at once.
+    Port: world.trace_torch.trace_objects (render_torch.PORTS).
     """
     camera, pose, dirs = shot.camera, shot.pose, shot.dirs
     h, w = camera.height, camera.width
@@ -242,7 +250,9 @@ def render_view(  # noqa: PLR0913, PLR0915, PLR0917 (the renderer's one entry po
     noise_key: tuple[int, ...] = (0,),
 ) -> View:
     """Render one camera with camera-to-world `pose` (4x4). A world with a look (world.appearance) goes
-    through its sensor: motion_m metres driven while the shutter is open, noise drawn from noise_key."""
+    through its sensor: motion_m metres driven while the shutter is open, noise drawn from noise_key.
+    Port: world.render_torch.render_views, world.shading_torch.shade (render_torch.PORTS).
+    """
     rays = camera.rays() if cam_rays is None else cam_rays
     dirs = matmul(rays, pose[:3, :3].T)  # (M, 3) world directions, t = depth
     origin = pose[:3, 3]
@@ -275,12 +285,13 @@ def render_view(  # noqa: PLR0913, PLR0915, PLR0917 (the renderer's one entry po
     distance = norm_rows(d_lit)
     unit = d_lit / distance[:, None]
     # A pixel's footprint on the surface: the geometric mean of its two axes picks the mip level.
-    footprint = t_lit / camera.fx / np.sqrt(np.maximum(np.abs(dot_rows(unit, normal)), 0.1))
+    footprint = t_lit / camera.fx / np.sqrt(np.maximum(np.abs(dot_rows(unit, normal)), MIN_GRAZING))
     detail = _detail(world, points, cls, footprint, ground)
     sun_vis = np.ones(len(lit))
     sun_vis[g] = sample_bilinear(world.shadow, *world.material_grid.coords(points[g, 0], points[g, 2]))
     if "dapple" in world.textures:  # sun through gaps in the crowns
-        gaps = sample_bilinear(world.textures["dapple"], *(np.mod(points[g][:, [0, 2]] / 0.05, 512).astype(np.float32).T), wrap=True)
+        texel = np.mod(points[g][:, [0, 2]] / DAPPLE_TEXEL_M, TEXTURE_SIZE).astype(np.float32)
+        gaps = sample_bilinear(world.textures["dapple"], *texel.T, wrap=True)
         sun_vis[g] = 1 - (1 - sun_vis[g]) * (1 - gaps)
     sky = world.sky
     sun = np.maximum(matmul(normal, sky.sun), 0.0) * sun_vis
@@ -289,7 +300,8 @@ def render_view(  # noqa: PLR0913, PLR0915, PLR0917 (the renderer's one entry po
     water = np.flatnonzero(cls == WATER)
     if len(water):
         reflected = unit[water] * np.array([1.0, -1.0, 1.0])
-        colour[water] = 0.45 * colour[water] + 0.55 * _sky_colour(world, reflected) * (0.4 + 0.6 * sun_vis[water, None])
+        own, sky_share, shade, lit_share = WATER_MIX
+        colour[water] = own * colour[water] + sky_share * _sky_colour(world, reflected) * (shade + lit_share * sun_vis[water, None])
     fog = 1.0 - np.exp(-t_lit * distance / sky.fog_m)
     rgb = np.empty((len(dirs), 3))
     rgb[lit] = colour * (1 - fog[:, None]) + world.sky.horizon * fog[:, None]
@@ -324,48 +336,72 @@ def _film(world: World, linear: np.ndarray, depth: np.ndarray, motion_m: float, 
 
 def _gamma_encode(rgb: np.ndarray) -> np.ndarray:
     """Linear light (N, 3) float64 to 8-bit, through the GAMMA table; rgb is overwritten (in place:
-    the same values as clip, scale and round into new arrays, without three image-sized temporaries)."""
+    the same values as clip, scale and round into new arrays, without three image-sized temporaries).
+    Port: world.shading_torch.gamma_encode (render_torch.PORTS).
+    """
     np.clip(rgb, 0.0, 1.0, out=rgb)
     rgb *= len(GAMMA) - 1
     rgb += 0.5
     return GAMMA[rgb.astype(np.int32)]
 
 
+# Texture detail and sky (_detail, _sky_colour; shading_torch's ports import these, never a copy).
+TEXTURE_SIZE = 512  # pixels of every tiled texture (fine, coarse, cloud)
+FINE_TEXEL_M, COARSE_TEXEL_M = 0.01, 0.08  # metres of surface per texel
+MIN_FOOTPRINT_M = 1e-4  # a pixel's footprint on the surface, at least (log2 of 0 is none)
+FINE_FADE = (1.2, 0.4, 0.3, 1.0)  # fine detail x clip(a - footprint / b, c, d): it fades where pixels are large
+FINE_GAIN, COARSE_GAIN, HUE_SHIFT, MIN_GAIN = 0.5, 0.35, 0.25, 0.05
+SUN_GLOW_POWER = 64
+CLOUD_PLANE_M, CLOUD_MIN_UP, CLOUD_EDGE, CLOUD_FADE_IN = 40.0, 0.02, 0.5, 8
+CLOUD_OFFSET, CLOUD_SLOPE = 2, 4  # cloud where the noise exceeds offset - slope x sky.cloud_cover
+CLOUD_COLOUR = (0.95, 0.95, 0.97)
+MIN_GRAZING = 0.1  # |cos| of the view to the surface, at least, in a pixel's footprint
+DAPPLE_TEXEL_M = 0.05  # the sun's gaps through the crowns, metres per texel
+WATER_MIX = (0.45, 0.55, 0.4, 0.6)  # water: a x its colour + b x the reflected sky x (c + d x sun)
+
+
 def _detail(world: World, points: np.ndarray, cls: np.ndarray, footprint: np.ndarray, ground: np.ndarray) -> np.ndarray:
-    """Multiplicative texture detail (N, 3), mip-blended by the pixel's footprint on the surface."""
+    """Multiplicative texture detail (N, 3), mip-blended by the pixel's footprint on the surface.
+    Port: world.shading_torch._detail (render_torch.PORTS).
+    """
     tex = world.textures
     # Ground textures lie in x-z; objects use x+z along their sides and y up them.
     a = np.where(ground, points[:, 0], points[:, 0] + points[:, 2])
     b = np.where(ground, points[:, 2], points[:, 1])
-    fine_u = np.mod(a / 0.01, 512).astype(np.float32)
-    fine_v = np.mod(b / 0.01, 512).astype(np.float32)
-    level = np.clip(np.log2(np.maximum(footprint, 1e-4) / 0.01) / 2, 0.0, 2.0)
+    fine_u = np.mod(a / FINE_TEXEL_M, TEXTURE_SIZE).astype(np.float32)
+    fine_v = np.mod(b / FINE_TEXEL_M, TEXTURE_SIZE).astype(np.float32)
+    level = np.clip(np.log2(np.maximum(footprint, MIN_FOOTPRINT_M) / FINE_TEXEL_M) / 2, 0.0, 2.0)
     mips = [sample_bilinear(tex[f"fine{k}"], fine_u, fine_v, wrap=True) for k in range(3)]
     w1 = np.clip(level, 0, 1)
     w2 = np.clip(level - 1, 0, 1)
     fine = mips[0] * (1 - w1) + mips[1] * (w1 - w2) + mips[2] * w2
-    fine *= np.clip(1.2 - footprint / 0.4, 0.3, 1.0)
-    coarse = sample_bilinear(tex["coarse"], np.mod(a / 0.08, 512).astype(np.float32), np.mod(b / 0.08, 512).astype(np.float32), wrap=True)
+    start, scale, low, high = FINE_FADE
+    fine *= np.clip(start - footprint / scale, low, high)
+    coarse_u = np.mod(a / COARSE_TEXEL_M, TEXTURE_SIZE).astype(np.float32)
+    coarse = sample_bilinear(tex["coarse"], coarse_u, np.mod(b / COARSE_TEXEL_M, TEXTURE_SIZE).astype(np.float32), wrap=True)
     contrast = (TEXTURE_CONTRAST if world.contrast is None else world.contrast)[cls]
-    gain = 1.0 + contrast * (0.5 * fine + 0.35 * coarse)
+    gain = 1.0 + contrast * (FINE_GAIN * fine + COARSE_GAIN * coarse)
     # Coarse patches also shift hue a little (dry grass, wet dirt).
-    hue = np.stack([1 + 0.25 * contrast * coarse, np.ones_like(coarse), 1 - 0.25 * contrast * coarse], axis=1)
-    return np.maximum(gain, 0.05)[:, None] * hue
+    hue = np.stack([1 + HUE_SHIFT * contrast * coarse, np.ones_like(coarse), 1 - HUE_SHIFT * contrast * coarse], axis=1)
+    return np.maximum(gain, MIN_GAIN)[:, None] * hue
 
 
 def _sky_colour(world: World, unit: np.ndarray) -> np.ndarray:
+    """The sky's colour (N, 3) in unit directions (N, 3).
+    Port: world.shading_torch._sky_colour (render_torch.PORTS).
+    """
     sky = world.sky
     up = np.clip(-unit[:, 1], 0.0, 1.0)
     base = sky.horizon + (sky.zenith - sky.horizon) * np.sqrt(up)[:, None]
-    sun_glow = np.clip(matmul(unit, sky.sun), 0, 1) ** 64
+    sun_glow = np.clip(matmul(unit, sky.sun), 0, 1) ** SUN_GLOW_POWER
     colour = base + sky.glow * sun_glow[:, None]
     # Clouds on a plane far overhead: a function of direction only, identical in both cameras.
-    rising = up > 0.02
+    rising = up > CLOUD_MIN_UP
     k = np.flatnonzero(rising)
-    scale = 40.0 / np.maximum(up[k], 0.02)
-    cu = np.mod(unit[k, 0] * scale, 512).astype(np.float32)
-    cv = np.mod(unit[k, 2] * scale, 512).astype(np.float32)
+    scale = CLOUD_PLANE_M / np.maximum(up[k], CLOUD_MIN_UP)
+    cu = np.mod(unit[k, 0] * scale, TEXTURE_SIZE).astype(np.float32)
+    cv = np.mod(unit[k, 2] * scale, TEXTURE_SIZE).astype(np.float32)
     density = sample_bilinear(world.textures["cloud"], cu, cv, wrap=True)
-    cover = np.clip((density - (2 - 4 * sky.cloud_cover)) * 0.5, 0, 1) * np.clip(up[k] * 8, 0, 1)
-    colour[k] = colour[k] * (1 - cover[:, None]) + np.array([0.95, 0.95, 0.97]) * cover[:, None]
+    cover = np.clip((density - (CLOUD_OFFSET - CLOUD_SLOPE * sky.cloud_cover)) * CLOUD_EDGE, 0, 1) * np.clip(up[k] * CLOUD_FADE_IN, 0, 1)
+    colour[k] = colour[k] * (1 - cover[:, None]) + np.array(CLOUD_COLOUR) * cover[:, None]
     return colour

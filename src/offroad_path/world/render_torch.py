@@ -19,7 +19,28 @@ from offroad_path.world.sensor import record
 from offroad_path.world.shading_torch import Hits, expose, gamma_encode, shade
 from offroad_path.world.trace_torch import F64, DeviceWorld, march_terrain, trace_objects
 
-__all__ = ["DeviceWorld", "render_views", "torch_device"]
+__all__ = ["PORTS", "DeviceWorld", "render_views", "torch_device"]
+
+# Each port and the reference it follows step by step (world.<module>.<name>): a fix to one is owed to the other.
+# Each names the other in its docstring; tests/world/test_render_torch.py walks the table.
+PORTS = (
+    ("kernels.sample_bilinear", "trace_torch.bilinear"),
+    ("terrain.Terrain", "trace_torch._Terrain"),
+    ("render.march_terrain", "trace_torch.march_terrain"),
+    ("render._refine", "trace_torch._refine"),
+    ("render._tangent_range", "trace_torch._tangent_range"),
+    ("objects.intersect", "trace_torch.intersect"),
+    ("render.trace_objects", "trace_torch.trace_objects"),
+    ("render.render_view", "render_torch.render_views"),
+    ("render.render_view", "shading_torch.shade"),
+    ("terrain.Grid.coords", "shading_torch._grid_coords"),
+    ("terrain.Terrain.normals", "shading_torch._terrain_normals"),
+    ("render._detail", "shading_torch._detail"),
+    ("render._sky_colour", "shading_torch._sky_colour"),
+    ("sensor.expose", "shading_torch.expose"),
+    ("sensor._motion_blur", "shading_torch._motion_blur"),
+    ("render._gamma_encode", "shading_torch.gamma_encode"),
+)
 
 
 def render_views(  # noqa: PLR0913

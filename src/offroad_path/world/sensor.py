@@ -54,15 +54,21 @@ def _cos16(m: int) -> float:
 DCT = np.array([[(np.sqrt(1 / 8) if k == 0 else 0.5) * _cos16((2 * n + 1) * k) for n in range(8)] for k in range(8)])  # (8, 8) orthonormal
 
 
+# Auto gain: luma summed as integers of LUMA_STEPS per unit (any order gives one sum), the gain clipped to GAIN_RANGE.
+LUMA_STEPS, MIN_MEAN, GAIN_RANGE = 4096, 1e-6, (0.4, 3.0)
+
+
 def expose(linear: np.ndarray, depth: np.ndarray, sensor: Sensor, motion_m: float) -> np.ndarray:
     """Linear light (H, W, 3) through gain, white balance, vignetting and motion blur: (H, W, 3) float64.
-    depth (H, W): metres along the optical axis, 0 for sky; motion_m: metres driven while the shutter is open."""
+    depth (H, W): metres along the optical axis, 0 for sky; motion_m: metres driven while the shutter is open.
+    Port: world.shading_torch.expose (render_torch.PORTS).
+    """
     h, w, _ = linear.shape
     out = linear * (np.asarray(sensor.white_balance) * sensor.exposure)
     if sensor.auto_gain:
         luma = out[..., 0] * LUMA[0] + out[..., 1] * LUMA[1] + out[..., 2] * LUMA[2]
-        mean = np.clip(np.rint(luma * 4096), 0, 1 << 20).astype(np.int64).sum() / (4096 * luma.size)  # integer sum: any order
-        out *= np.clip(sensor.target / max(mean, 1e-6), 0.4, 3.0)
+        mean = np.clip(np.rint(luma * LUMA_STEPS), 0, 1 << 20).astype(np.int64).sum() / (LUMA_STEPS * luma.size)  # integer sum: any order
+        out *= np.clip(sensor.target / max(mean, MIN_MEAN), *GAIN_RANGE)
     v, u = np.mgrid[0:h, 0:w]
     r2 = ((u - (w - 1) / 2) / (w / 2)) ** 2 + ((v - (h - 1) / 2) / (h / 2)) ** 2
     out *= (1 - sensor.vignetting * r2 / 2)[..., None]
@@ -73,7 +79,9 @@ def expose(linear: np.ndarray, depth: np.ndarray, sensor: Sensor, motion_m: floa
 
 def _motion_blur(image: np.ndarray, depth: np.ndarray, motion_m: float) -> np.ndarray:
     """The average over the shutter of a camera driving `motion_m` forward: a point at depth Z seen at
-    pixel p was at c + (p - c) Z / (Z + s) when the camera was s metres back (sky does not move)."""
+    pixel p was at c + (p - c) Z / (Z + s) when the camera was s metres back (sky does not move).
+    Port: world.shading_torch._motion_blur (render_torch.PORTS).
+    """
     h, w, _ = image.shape
     v, u = np.mgrid[0:h, 0:w].astype(np.float64)
     cx, cy = (w - 1) / 2, (h - 1) / 2

@@ -9,8 +9,31 @@ import torch
 from torch import Tensor
 
 from offroad_path.world.classes import SKY, WATER
-from offroad_path.world.render import GAMMA, PinholeCamera
-from offroad_path.world.sensor import BLUR_SAMPLES, LUMA
+from offroad_path.world.render import (
+    CLOUD_COLOUR,
+    CLOUD_EDGE,
+    CLOUD_FADE_IN,
+    CLOUD_MIN_UP,
+    CLOUD_OFFSET,
+    CLOUD_PLANE_M,
+    CLOUD_SLOPE,
+    COARSE_GAIN,
+    COARSE_TEXEL_M,
+    DAPPLE_TEXEL_M,
+    FINE_FADE,
+    FINE_GAIN,
+    FINE_TEXEL_M,
+    GAMMA,
+    HUE_SHIFT,
+    MIN_FOOTPRINT_M,
+    MIN_GAIN,
+    MIN_GRAZING,
+    SUN_GLOW_POWER,
+    TEXTURE_SIZE,
+    WATER_MIX,
+    PinholeCamera,
+)
+from offroad_path.world.sensor import BLUR_SAMPLES, GAIN_RANGE, LUMA, LUMA_STEPS, MIN_MEAN
 from offroad_path.world.terrain import Grid
 from offroad_path.world.trace_torch import F32, F64, DeviceWorld, bilinear
 
@@ -54,14 +77,14 @@ def shade(dw: DeviceWorld, camera: PinholeCamera, hits: Hits) -> tuple[Tensor, T
 
     distance = torch.linalg.vector_norm(d_lit, dim=1)
     unit = d_lit / distance[:, None]
-    footprint = t_lit / camera.fx / torch.sqrt(torch.clamp((unit * normal).sum(1).abs(), min=0.1))
+    footprint = t_lit / camera.fx / torch.sqrt(torch.clamp((unit * normal).sum(1).abs(), min=MIN_GRAZING))
     detail = _detail(dw, points, cls, footprint, ground)
     sun_vis = torch.ones(len(lit), dtype=F64, device=dw.device)
     gx, gz = _grid_coords(mgrid, points[g, 0], points[g, 2])
     sun_vis[g] = bilinear(dw.shadow, gx, gz).to(F64)
     if "dapple" in dw.textures:
-        du = torch.remainder(points[g, 0] / 0.05, 512).to(F32)
-        dv = torch.remainder(points[g, 2] / 0.05, 512).to(F32)
+        du = torch.remainder(points[g, 0] / DAPPLE_TEXEL_M, TEXTURE_SIZE).to(F32)
+        dv = torch.remainder(points[g, 2] / DAPPLE_TEXEL_M, TEXTURE_SIZE).to(F32)
         gaps = bilinear(dw.textures["dapple"], du, dv, wrap=True).to(F64)
         sun_vis[g] = 1 - (1 - sun_vis[g]) * (1 - gaps)
     sun = torch.clamp(normal @ dw.vector(sky.sun), min=0.0) * sun_vis
@@ -70,7 +93,8 @@ def shade(dw: DeviceWorld, camera: PinholeCamera, hits: Hits) -> tuple[Tensor, T
     water = torch.nonzero(cls == WATER)[:, 0]
     if len(water):
         reflected = unit[water] * dw.vector([1.0, -1.0, 1.0])
-        colour[water] = 0.45 * colour[water] + 0.55 * _sky_colour(dw, reflected) * (0.4 + 0.6 * sun_vis[water, None])
+        own, sky_share, shade, lit_share = WATER_MIX
+        colour[water] = own * colour[water] + sky_share * _sky_colour(dw, reflected) * (shade + lit_share * sun_vis[water, None])
     fog = (1.0 - torch.exp(-t_lit * distance / sky.fog_m))[:, None]
     rgb = torch.empty(len(dirs), 3, dtype=F64, device=dw.device)
     rgb[lit] = colour * (1 - fog) + dw.vector(sky.horizon) * fog
@@ -97,18 +121,21 @@ def _detail(dw: DeviceWorld, points: Tensor, cls: Tensor, footprint: Tensor, gro
     tex = dw.textures
     a = torch.where(ground, points[:, 0], points[:, 0] + points[:, 2])
     b = torch.where(ground, points[:, 2], points[:, 1])
-    fine_u, fine_v = torch.remainder(a / 0.01, 512).to(F32), torch.remainder(b / 0.01, 512).to(F32)
-    level = torch.clamp(torch.log2(torch.clamp(footprint, min=1e-4) / 0.01) / 2, 0.0, 2.0)
+    fine_u = torch.remainder(a / FINE_TEXEL_M, TEXTURE_SIZE).to(F32)
+    fine_v = torch.remainder(b / FINE_TEXEL_M, TEXTURE_SIZE).to(F32)
+    level = torch.clamp(torch.log2(torch.clamp(footprint, min=MIN_FOOTPRINT_M) / FINE_TEXEL_M) / 2, 0.0, 2.0)
     mips = [bilinear(tex[f"fine{k}"], fine_u, fine_v, wrap=True).to(F64) for k in range(3)]
     w1, w2 = level.clamp(0, 1), (level - 1).clamp(0, 1)
     fine = mips[0] * (1 - w1) + mips[1] * (w1 - w2) + mips[2] * w2
-    fine = fine * torch.clamp(1.2 - footprint / 0.4, 0.3, 1.0)
-    coarse_u, coarse_v = torch.remainder(a / 0.08, 512).to(F32), torch.remainder(b / 0.08, 512).to(F32)
+    start, scale, low, high = FINE_FADE
+    fine = fine * torch.clamp(start - footprint / scale, low, high)
+    coarse_u = torch.remainder(a / COARSE_TEXEL_M, TEXTURE_SIZE).to(F32)
+    coarse_v = torch.remainder(b / COARSE_TEXEL_M, TEXTURE_SIZE).to(F32)
     coarse = bilinear(tex["coarse"], coarse_u, coarse_v, wrap=True).to(F64)
     contrast = dw.contrast[cls.long()]
-    gain = 1.0 + contrast * (0.5 * fine + 0.35 * coarse)
-    hue = torch.stack([1 + 0.25 * contrast * coarse, torch.ones_like(coarse), 1 - 0.25 * contrast * coarse], dim=1)
-    return torch.clamp(gain, min=0.05)[:, None] * hue
+    gain = 1.0 + contrast * (FINE_GAIN * fine + COARSE_GAIN * coarse)
+    hue = torch.stack([1 + HUE_SHIFT * contrast * coarse, torch.ones_like(coarse), 1 - HUE_SHIFT * contrast * coarse], dim=1)
+    return torch.clamp(gain, min=MIN_GAIN)[:, None] * hue
 
 
 def _sky_colour(dw: DeviceWorld, unit: Tensor) -> Tensor:
@@ -117,13 +144,16 @@ def _sky_colour(dw: DeviceWorld, unit: Tensor) -> Tensor:
     up = torch.clamp(-unit[:, 1], 0.0, 1.0)
     horizon, zenith = dw.vector(sky.horizon), dw.vector(sky.zenith)
     colour = horizon + (zenith - horizon) * torch.sqrt(up)[:, None]
-    colour = colour + sky.glow * (torch.clamp(unit @ dw.vector(sky.sun), 0, 1) ** 64)[:, None]
-    k = torch.nonzero(up > 0.02)[:, 0]
-    scale = 40.0 / torch.clamp(up[k], min=0.02)
-    cu, cv = torch.remainder(unit[k, 0] * scale, 512).to(F32), torch.remainder(unit[k, 2] * scale, 512).to(F32)
+    colour = colour + sky.glow * (torch.clamp(unit @ dw.vector(sky.sun), 0, 1) ** SUN_GLOW_POWER)[:, None]
+    k = torch.nonzero(up > CLOUD_MIN_UP)[:, 0]
+    scale = CLOUD_PLANE_M / torch.clamp(up[k], min=CLOUD_MIN_UP)
+    cu, cv = torch.remainder(unit[k, 0] * scale, TEXTURE_SIZE).to(F32), torch.remainder(unit[k, 2] * scale, TEXTURE_SIZE).to(F32)
     density = bilinear(dw.textures["cloud"], cu, cv, wrap=True).to(F64)
-    cover = (torch.clamp((density - (2 - 4 * sky.cloud_cover)) * 0.5, 0, 1) * torch.clamp(up[k] * 8, 0, 1))[:, None]
-    colour[k] = colour[k] * (1 - cover) + dw.vector([0.95, 0.95, 0.97]) * cover
+    cover = (
+        torch.clamp((density - (CLOUD_OFFSET - CLOUD_SLOPE * sky.cloud_cover)) * CLOUD_EDGE, 0, 1)
+        * torch.clamp(up[k] * CLOUD_FADE_IN, 0, 1)
+    )[:, None]
+    colour[k] = colour[k] * (1 - cover) + dw.vector(list(CLOUD_COLOUR)) * cover
     return colour
 
 
@@ -134,9 +164,9 @@ def expose(dw: DeviceWorld, linear: Tensor, depth: Tensor, motion_m: Tensor) -> 
     out = linear * (dw.vector(sensor.white_balance) * sensor.exposure)
     if sensor.auto_gain:
         luma = out[..., 0] * float(LUMA[0]) + out[..., 1] * float(LUMA[1]) + out[..., 2] * float(LUMA[2])
-        total = torch.clamp(torch.round(luma * 4096), 0, 1 << 20).long().sum(dim=(1, 2))  # integer sums: any order
-        mean = total.to(F64) / (4096 * h * w)
-        out = out * torch.clamp(sensor.target / torch.clamp(mean, min=1e-6), 0.4, 3.0)[:, None, None, None]
+        total = torch.clamp(torch.round(luma * LUMA_STEPS), 0, 1 << 20).long().sum(dim=(1, 2))  # integer sums: any order
+        mean = total.to(F64) / (LUMA_STEPS * h * w)
+        out = out * torch.clamp(sensor.target / torch.clamp(mean, min=MIN_MEAN), *GAIN_RANGE)[:, None, None, None]
     v, u = torch.meshgrid(torch.arange(h, device=dw.device, dtype=F64), torch.arange(w, device=dw.device, dtype=F64), indexing="ij")
     r2 = ((u - (w - 1) / 2) / (w / 2)) ** 2 + ((v - (h - 1) / 2) / (h / 2)) ** 2
     out = out * (1 - sensor.vignetting * r2 / 2)[None, ..., None]

@@ -17,6 +17,8 @@ import numpy as np
 from offroad_path.geometry.exact import norm_rows
 from offroad_path.world.kernels import resize_cubic, sample_bilinear
 
+CELL_MARGIN = 1.001  # cell coordinates stop this short of the last row and column: a bilinear lookup has a cell beyond
+
 
 @dataclass
 class Grid:
@@ -28,7 +30,9 @@ class Grid:
     shape: tuple[int, int]  # (rows along z, cols along x)
 
     def coords(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Fractional (col, row) of world points, as float32 maps for sample_bilinear."""
+        """Fractional (col, row) of world points, as float32 maps for sample_bilinear.
+        Port: world.shading_torch._grid_coords (render_torch.PORTS).
+        """
         return ((x - self.x0) / self.step).astype(np.float32), ((z - self.z0) / self.step).astype(np.float32)
 
     def nearest(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -42,7 +46,9 @@ class Grid:
 
 
 class Terrain:
-    """Height field with exact bilinear evaluation and smooth shading normals."""
+    """Height field with exact bilinear evaluation and smooth shading normals.
+    Port: world.trace_torch._Terrain (render_torch.PORTS).
+    """
 
     def __init__(self, heights: np.ndarray, grid: Grid):
         self.heights = np.ascontiguousarray(heights, dtype=np.float64)  # (rows, cols), metres up
@@ -83,8 +89,8 @@ class Terrain:
     def cell_coords(self, x: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fractional grid coordinates (float32), clamped inside the grid."""
         g = self.grid
-        fx = np.clip((x - g.x0) * (1.0 / g.step), 0.0, self._cols - 1.001).astype(np.float32, copy=False)
-        fz = np.clip((z - g.z0) * (1.0 / g.step), 0.0, self._rows - 1.001).astype(np.float32, copy=False)
+        fx = np.clip((x - g.x0) * (1.0 / g.step), 0.0, self._cols - CELL_MARGIN).astype(np.float32, copy=False)
+        fz = np.clip((z - g.z0) * (1.0 / g.step), 0.0, self._rows - CELL_MARGIN).astype(np.float32, copy=False)
         return fx, fz
 
     def elevation_at_cells(self, fx: np.ndarray, fz: np.ndarray) -> np.ndarray:
@@ -115,7 +121,9 @@ class Terrain:
         return float(window.max()) if window.size else self.max_elevation
 
     def normals(self, x: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """Unit surface normals (N, 3) in the world frame (pointing up, i.e. negative y)."""
+        """Unit surface normals (N, 3) in the world frame (pointing up, i.e. negative y).
+        Port: world.shading_torch._terrain_normals (render_torch.PORTS).
+        """
         grad = sample_bilinear(self._grad, *self.grid.coords(x, z))
         n = np.stack([-grad[:, 0], -np.ones(len(grad), np.float32), -grad[:, 1]], axis=1)
         return n / norm_rows(n)[:, None]

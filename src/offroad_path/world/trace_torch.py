@@ -15,8 +15,9 @@ from torch import Tensor
 from offroad_path.world.classes import TEXTURE_CONTRAST
 from offroad_path.world.objects import BOX, CYLINDER, SPHERE
 from offroad_path.world.objects import NEAR_M as OBJECT_NEAR_M
-from offroad_path.world.render import BISECTIONS, MIN_STEP_M, NEAR_M, REFINEMENTS, RELAX, PinholeCamera
+from offroad_path.world.render import BISECTIONS, COMPACT_BELOW, MAX_TAN_ANGLE, MIN_STEP_M, NEAR_M, REFINEMENTS, RELAX, PinholeCamera
 from offroad_path.world.scene import World
+from offroad_path.world.terrain import CELL_MARGIN
 
 F32, F64 = torch.float32, torch.float64
 
@@ -79,8 +80,8 @@ class _Terrain:
 
     def cells(self, x: Tensor, z: Tensor) -> tuple[Tensor, Tensor]:
         g = self.grid
-        fx = ((x - g.x0) * (1.0 / g.step)).clamp(0.0, self.cols - 1.001).to(F32)
-        fz = ((z - g.z0) * (1.0 / g.step)).clamp(0.0, self.rows - 1.001).to(F32)
+        fx = ((x - g.x0) * (1.0 / g.step)).clamp(0.0, self.cols - CELL_MARGIN).to(F32)
+        fz = ((z - g.z0) * (1.0 / g.step)).clamp(0.0, self.rows - CELL_MARGIN).to(F32)
         return fx, fz
 
     def elevation_at(self, fx: Tensor, fz: Tensor) -> Tensor:
@@ -98,7 +99,9 @@ class _Terrain:
 
 def march_terrain(dw: DeviceWorld, origin: Tensor, dirs: Tensor, top: Tensor, max_t: float) -> Tensor:
     """Depth (R,) float64 of each ray's first terrain crossing, inf where none within max_t: rays from
-    origins (R, 3) along dirs (R, 3) (t = depth), `top` (R,) the highest terrain near each ray's camera."""
+    origins (R, 3) along dirs (R, 3) (t = depth), `top` (R,) the highest terrain near each ray's camera.
+    Reference: world.render.march_terrain.
+    """
     terrain = _Terrain(dw)
     origin, dirs = origin.to(F32), dirs.to(F32)
     horizontal = torch.hypot(dirs[:, 0], dirs[:, 2])
@@ -129,7 +132,7 @@ def march_terrain(dw: DeviceWorld, origin: Tensor, dirs: Tensor, top: Tensor, ma
         t_prev, c_prev = t, c
         t = t + step
         alive &= ~crossed & (t < limit)
-        if alive.sum() < 0.75 * len(alive):  # compact, as the reference does
+        if alive.sum() < COMPACT_BELOW * len(alive):  # compact, as the reference does
             keep = torch.nonzero(alive)[:, 0]
             idx, t, t_prev, c_prev, alive = idx[keep], t[keep], t_prev[keep], c_prev[keep], alive[keep]
             per_ray = [a[keep] for a in per_ray]
@@ -165,8 +168,8 @@ def _tangent_range(a: Tensor, z: Tensor, r: Tensor, f: float, c: float) -> tuple
     half = torch.asin((r / dist).nan_to_num(nan=0.0, posinf=1.0).clamp(0.0, 1.0))
     centre = torch.atan2(a, z)
     lo_angle, hi_angle = centre - half, centre + half
-    lo = torch.where(lo_angle <= -math.pi / 2, -math.inf, f * torch.tan(lo_angle.clamp(-1.5, 1.5)) + c)
-    hi = torch.where(hi_angle >= math.pi / 2, math.inf, f * torch.tan(hi_angle.clamp(-1.5, 1.5)) + c)
+    lo = torch.where(lo_angle <= -math.pi / 2, -math.inf, f * torch.tan(lo_angle.clamp(-MAX_TAN_ANGLE, MAX_TAN_ANGLE)) + c)
+    hi = torch.where(hi_angle >= math.pi / 2, math.inf, f * torch.tan(hi_angle.clamp(-MAX_TAN_ANGLE, MAX_TAN_ANGLE)) + c)
     behind = (hi_angle <= -math.pi / 2) | (lo_angle >= math.pi / 2)
     surrounds = dist <= r
     lo = torch.where(surrounds, -math.inf, torch.where(behind, math.inf, lo))
