@@ -114,6 +114,8 @@ def stage_seconds(stage: str, s: dict[str, float], u: dict) -> float:
 def throughput(running: int, side_by_side: dict) -> float:
     """How many stages' worth of work the host does per second with `running` stages at once: the
     measured gain at the measured count, linear below it, no more above it."""
+    if side_by_side["stages"] <= 1:  # one at a time (--jobs 1 with --assume-gain): no gain to spread
+        return 1.0
     measured = side_by_side["stages"] / side_by_side["slowdown"]
     k = min(running, side_by_side["stages"])
     return 1.0 + (measured - 1.0) * (k - 1) / (side_by_side["stages"] - 1)

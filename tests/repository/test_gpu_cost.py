@@ -18,6 +18,7 @@ def test_side_by_side_throughput_is_the_measured_gain_and_no_more_beyond_its_cou
     assert throughput(3, three) == pytest.approx(1.5)
     assert throughput(2, three) == pytest.approx(1.25)  # linear between one and the measured count
     assert throughput(8, three) == pytest.approx(1.5)
+    assert throughput(1, {"stages": 1, "slowdown": 1.0}) == 1.0  # --jobs 1 --assume-gain X: one at a time
 
 
 def test_stages_run_in_order_once_upstream_is_done_sharing_the_host():
