@@ -29,6 +29,7 @@ done
 # Every argument checked before any work (a --limit timeout cannot take runs its benchmarks, then fails).
 [[ "$LIMIT" =~ ^[0-9]+$ && "$LIMIT" -gt 0 ]] || { echo "error: --limit: $LIMIT is not a whole number of seconds above 0" >&2; exit 2; }
 [[ "$JOBS" =~ ^[0-9]+$ && "$JOBS" -gt 0 ]] || { echo "error: --jobs: $JOBS is not a whole number above 0" >&2; exit 2; }
+[ ! -e "$OUT_DIR/run.tgz" ] || { echo "error: --out: $OUT_DIR/run.tgz exists; name another folder" >&2; exit 2; }
 [ "$WHEELHOUSE" = none ] || [ -d "$WHEELHOUSE" ] || { echo "error: --wheelhouse: $WHEELHOUSE is no folder (or none)" >&2; exit 2; }
 PIPELINE=gpu/dvc.yaml RENDER=(--set render.backend=torch) TRAINING=()
 if [ "$REHEARSE" = 1 ]; then

@@ -26,7 +26,6 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tools"), str(ROOT / "benchmarks")]
-REPORT_S = 10  # the results page and the archive: assumed (a few seconds on the 2-core Xeon)
 MEASURED_DRIVES, MEASURED_FRAMES, MEASURED_BATCH = 16, 100, 32  # the H200 stage times' sizes: one epoch of 16 drives
 
 
@@ -148,7 +147,7 @@ def estimate(folder: str = "gpu", jobs: int = 4, overrides: tuple[str, ...] = ()
 
     from offroad_path.config import load_config
 
-    costs, _ = unit_costs()
+    costs, components = unit_costs()
     cfg = load_config(f"experiment={PIPELINES[folder][0]}", *overrides)
     work = sizes(cfg, costs)
     order, upstream = stage_graph(ROOT, f"{folder}/dvc.yaml")
@@ -156,7 +155,6 @@ def estimate(folder: str = "gpu", jobs: int = 4, overrides: tuple[str, ...] = ()
     side_by_side = {"stages": jobs, "slowdown": jobs / gain} if gain else costs["side_by_side"]
     spans = schedule(order, upstream, alone, jobs, side_by_side)
     pipeline = max(end for _, end in spans.values())
-    margin = yaml.safe_load((ROOT / "gpu" / "sizing.yaml").read_text())["margin"]
     return {
         "pipeline": folder,
         "jobs": jobs,
@@ -165,9 +163,10 @@ def estimate(folder: str = "gpu", jobs: int = 4, overrides: tuple[str, ...] = ()
         "spans": spans,
         "install_s": costs["install_s"],
         "pipeline_s": pipeline,
-        "report_s": REPORT_S * margin,
-        "total_s": costs["install_s"] + pipeline + REPORT_S * margin,
+        "report_s": costs["report_s"],
+        "total_s": costs["install_s"] + pipeline + costs["report_s"],
         "design": cfg.evaluate,
+        "components": components,
     }
 
 
@@ -223,12 +222,11 @@ def main() -> None:
         f"\ninstall {found['install_s']:.0f} s + pipeline {found['pipeline_s']:.0f} s (--jobs {args.jobs}) + results page and archive "
         f"{found['report_s']:.0f} s = {found['total_s']:.0f} s ({found['total_s'] / 60:.1f} min)"
     )
-    _, components = unit_costs()
     print("\n| primary | in the design | half-width | power |\n| --- | --- | --- | --- |")
-    for name, role, half, p in power_rows(found["design"], components):
+    for name, role, half, p in power_rows(found["design"], found["components"]):
         print(f"| {name} | {role} | ±{half:.3f} | {100 * p:.0f} % |")
     if args.json:
-        args.json.write_text(json.dumps({k: v for k, v in found.items() if k != "design"}, indent=1) + "\n")
+        args.json.write_text(json.dumps({k: v for k, v in found.items() if k not in ("design", "components")}, indent=1) + "\n")
 
 
 if __name__ == "__main__":

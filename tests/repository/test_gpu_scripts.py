@@ -39,3 +39,12 @@ def test_a_bad_argument_is_refused_before_any_folder_is_made(checkout, script, a
     assert run.returncode == 2 and run.stderr.strip().startswith(f"error: {says}") and len(run.stderr.strip().splitlines()) == 1, run.stderr
     for made in ("gpu/metrics", "gpu/data", "rehearsal/metrics", "tour/metrics", "m"):
         assert not (checkout / made).exists(), made
+
+
+def test_measure_refuses_an_earlier_archive_before_its_benchmarks(checkout):
+    """gpu/repro.sh refuses to replace an archive; measure.sh says so before its benchmarks' minutes, and keeps it."""
+    (checkout / "kept").mkdir()
+    (checkout / "kept" / "run.tgz").write_bytes(b"an earlier slot's figures")
+    run = subprocess.run(["bash", str(checkout / "gpu" / "measure.sh"), "--out", "kept"], cwd=checkout, capture_output=True, text=True)
+    assert run.returncode == 2 and run.stderr.strip() == "error: --out: kept/run.tgz exists; name another folder", run.stderr
+    assert (checkout / "kept" / "run.tgz").read_bytes() == b"an earlier slot's figures" and not (checkout / "gpu" / "metrics").exists()

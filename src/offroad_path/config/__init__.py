@@ -78,7 +78,7 @@ def validate_config(cfg: DictConfig, groups: tuple[str, ...] | None = None) -> N
     if (groups is None or "world" in groups) and OmegaConf.select(cfg, "world.appearance") is not None:
         check_looks_drawable(cfg.world.appearance)
     if (groups is None or "model" in groups) and OmegaConf.select(cfg, "model") is not None:
-        check_batch_norm(cfg.model)
+        check_batch_norm(cfg.model.get("name"), cfg.model.get("batch_norm"))
 
 
 def run_grid(architectures: list[str], pretrainings: list[str]) -> list[str]:

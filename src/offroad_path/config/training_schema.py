@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from omegaconf import MISSING
 
@@ -64,11 +63,11 @@ class ModelConfig:
 BATCH_NORM_CHOICE = ("fcn",)
 
 
-def check_batch_norm(model: Any) -> None:
+def check_batch_norm(name: str, batch_norm: bool | None) -> None:
     """model.batch_norm only for a network whose normalisation is a choice: one line, before any work."""
-    if model.get("batch_norm") is not None and model.get("name") not in BATCH_NORM_CHOICE:
+    if batch_norm is not None and name not in BATCH_NORM_CHOICE:
         raise ConfigValueError(
-            f"model.batch_norm={model.batch_norm}: {model.name} has batch norm after every convolution as published, not a choice "
+            f"model.batch_norm={batch_norm}: {name} has batch norm after every convolution as published, not a choice "
             f"(null; a choice of {', '.join(BATCH_NORM_CHOICE)} only)"
         )
 

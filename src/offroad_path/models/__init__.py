@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from offroad_path.config.training_schema import BATCH_NORM_CHOICE
+from offroad_path.config.training_schema import check_batch_norm
 from offroad_path.models.base import SegmentationNet
 from offroad_path.models.fcn import FCN8s
 from offroad_path.models.segnet import SegNet
@@ -15,11 +15,7 @@ def build_model(name: str, num_classes: int = 2, width: float = 1.0, batch_norm:
     """batch_norm: the choice of a network that has one (FCN-8s); None: the network's own."""
     if name not in MODELS:
         raise ValueError(f"unknown model {name!r}; valid: {', '.join(sorted(MODELS))}")
-    if batch_norm is not None and name not in BATCH_NORM_CHOICE:
-        raise ValueError(
-            f"model.batch_norm={batch_norm}: {name} has batch norm after every convolution as published, not a choice "
-            f"(null; a choice of {', '.join(BATCH_NORM_CHOICE)} only)"
-        )
+    check_batch_norm(name, batch_norm)
     return MODELS[name](num_classes=num_classes, width=width, **({} if batch_norm is None else {"batch_norm": batch_norm}))
 
 

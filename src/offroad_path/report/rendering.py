@@ -301,9 +301,6 @@ def _stress_cell(entry: dict) -> str:
     return f"{entry['iou']:.3f}, {Interval(entry['minus_prior'], entry['low'], entry['high']).difference_text()}"
 
 
-ARGUMENTS = DRIVE_ARGUMENTS  # the drive's arguments and their questions (conf: drive.arguments)
-
-
 def _interval_of(entry: dict) -> Interval:
     return Interval(entry["value"], entry["low"], entry["high"])
 
@@ -341,6 +338,6 @@ def argument_markdown(argument: str, entry: dict, heading: str = "##") -> str:
     """One argument's section from its metrics (drive.json's entry): the drive stage's results.md and
     docs/results.md render it with this, and only this."""
     return (
-        f"\n{heading} {ARGUMENTS[argument]}\n\n{drive_table(entry['policies'])}\n\n{comparison_table(entry['path_minus_end_to_end'])}"
+        f"\n{heading} {DRIVE_ARGUMENTS[argument]}\n\n{drive_table(entry['policies'])}\n\n{comparison_table(entry['path_minus_end_to_end'])}"
         f"\n\nExploratory: {entry['finding']}\n"
     )

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import statistics
 
+from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS
 from offroad_path.report.rendering import (
-    ARGUMENTS,
     against_pilotnet_markdown,
     argument_markdown,
     baselines_markdown,
@@ -219,7 +219,7 @@ def pilotnet_check(steering: list[dict], name: str = "") -> str:
 
 
 def _driving(drive: dict, conclusions=None) -> list[str]:
-    arguments = [a for a in ARGUMENTS if a in drive]
+    arguments = [a for a in DRIVE_ARGUMENTS if a in drive]
     if not arguments:
         return []
     d = drive["drives"]

@@ -117,16 +117,20 @@ def end_open_runs_killed(timeout_s: float = 5.0) -> None:
         from mlflow.tracking import MlflowClient
 
         for run_id, uri in list(OPEN_RUNS.items()):
-            client = MlflowClient(uri)
-            now = int(time.time() * 1000)
-            client.set_terminated(run_id, "KILLED", end_time=now)
-            parent = client.get_run(run_id).data.tags.get("mlflow.parentRunId")
-            if parent and client.get_run(parent).data.tags.get("stage") == "dvc repro":
-                client.set_terminated(parent, "KILLED", end_time=now)
+            end_killed(MlflowClient(uri), run_id)
 
     stopping = threading.Thread(target=end, daemon=True)
     stopping.start()
     stopping.join(timeout_s)
+
+
+def end_killed(client: Any, run_id: str) -> None:
+    """A stage's run ends KILLED, and so does the `dvc repro` parent it belongs to (the repro stopped with it)."""
+    now = int(time.time() * 1000)
+    client.set_terminated(run_id, "KILLED", end_time=now)
+    parent = client.get_run(run_id).data.tags.get("mlflow.parentRunId")
+    if parent and client.get_run(parent).data.tags.get("stage") == "dvc repro":
+        client.set_terminated(parent, "KILLED", end_time=now)
 
 
 def multirun_parent(cfg: DictConfig) -> str | None:
@@ -156,7 +160,11 @@ PROCESS_TAG = "process"  # a stage run's `<host>-<pid>-<start>`: a run left RUNN
 def process_key(pid: int) -> str | None:
     """`<host>-<pid>-<start>` of a live process (the start time tells it from a later one of the same pid)."""
     found = process_started(pid)
-    return None if found is None else f"{os.uname().nodename}-{pid}-{found[1]}"
+    return None if found is None else _key(pid, found[1])
+
+
+def _key(pid: int, start: int) -> str:
+    return f"{os.uname().nodename}-{pid}-{start}"
 
 
 def _gone(key: str | None) -> bool:
@@ -174,20 +182,16 @@ def end_abandoned_runs(uri: str, experiment: str) -> None:
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(uri)
-    now = int(time.time() * 1000)
     for run in client.search_runs([experiment], filter_string="attributes.status = 'RUNNING'", max_results=1000):
         if _gone(run.data.tags.get(PROCESS_TAG)):
-            client.set_terminated(run.info.run_id, "KILLED", end_time=now)
-            parent = run.data.tags.get("mlflow.parentRunId")
-            if parent and client.get_run(parent).data.tags.get("stage") == "dvc repro":
-                client.set_terminated(parent, "KILLED", end_time=now)
+            end_killed(client, run.info.run_id)
 
 
 def dvc_repro_process() -> str | None:
     """`<host>-<pid>-<start>` of the `dvc repro` (or `dvc exp run`) this process runs under
     (utils.lifetime finds it); None outside DVC. Every stage of one repro gets the same."""
     found = dvc_ancestor()
-    return None if found is None else f"{os.uname().nodename}-{found[0]}-{found[1]}"
+    return None if found is None else _key(*found)
 
 
 def pipeline_parent(cfg: DictConfig) -> str | None:
