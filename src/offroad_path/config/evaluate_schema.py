@@ -40,8 +40,14 @@ DRIVE_ARGUMENTS = {
     "vehicle": "(b) another vehicle: the same networks on a vehicle with 1.5 x the wheelbase, another lock and a higher camera",
     "traction": "(c) traction: the same networks on ground where the vehicle turns less than the bicycle model says (world.slip)",
 }
-# The report sections a primary's compare may name: the evaluate stage's two, then the drive's arguments.
-PRIMARY_SECTIONS = ("uncertainty", "steering_from_paths", *DRIVE_ARGUMENTS)
+# The report sections a primary's compare may name, each with the quantity its comparisons measure:
+# the evaluate stage's two, then the drive's arguments.
+PRIMARY_SECTIONS = {"uncertainty": "IoU", "steering_from_paths": "steering error"} | dict.fromkeys(DRIVE_ARGUMENTS, "interventions per km")
+# The paper's central claim as one comparison of the uncertainty section: every run without pretraining
+# above the mean-path prior, an intersection-union test (Berger 1982): it rejects when each run's own
+# comparison rejects, so it is answered by the weakest of them (the largest p-value; one at or below the
+# prior when there is such a run).
+EVERY_SCRATCH_VS_PRIOR = "every_scratch_run_vs_mean_path_prior"
 
 
 @dataclass

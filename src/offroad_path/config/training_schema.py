@@ -133,6 +133,7 @@ class PostprocessConfig:
 class SteeringConfig:
     """The end-to-end baseline: PilotNet regressing normalised steering from one image."""
 
+    _target_: str = MISSING  # the task's builder (steering.pilotnet_task.steering_task): SteeringTask's arguments are taken from these keys
     out_dir: str = MISSING
     labels_dir: str = MISSING  # where each sequence's poses place its frames along the path
     split_dir: str = MISSING  # the path split, whose blocks of driving this split follows

@@ -94,11 +94,11 @@ def checkpoint_of(name: str, d, seed: int) -> Path | None:
 
 def pilotnet_checkpoint(path: Path) -> dict:
     """A train_steering checkpoint (weights_only); CheckpointError naming the file for any other."""
-    from offroad_path.steering.pilotnet_task import SteeringTask
+    from offroad_path.steering.pilotnet_task import required_hyperparameters
     from offroad_path.training.checkpoints import CheckpointError, load_checkpoint
 
     saved = load_checkpoint(path)
-    if missing := [k for k in SteeringTask.KEYS if k not in saved["hyper_parameters"]]:
+    if missing := [k for k in required_hyperparameters() if k not in saved["hyper_parameters"]]:
         raise CheckpointError(f"{path}: not a PilotNet checkpoint of train_steering (no {', '.join(missing)} among its hyper-parameters)")
     return saved
 

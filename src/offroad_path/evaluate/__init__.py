@@ -107,8 +107,8 @@ def evaluate(cfg: DictConfig) -> list[Record]:
 def check_primaries(e: DictConfig) -> None:
     """Each primary names a comparison that can exist (before any work); one this run does not make
     (evaluate.runs without its runs) is reported as not measured."""
-    from offroad_path.config.evaluate_schema import PRIMARY_SECTIONS
-    from offroad_path.evaluate.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
+    from offroad_path.config.evaluate_schema import EVERY_SCRATCH_VS_PRIOR, PRIMARY_SECTIONS
+    from offroad_path.evaluate.uncertainty import comparisons
     from offroad_path.statistics.primaries import check_declared
 
     pairs = comparisons(list(e.runs))
@@ -124,7 +124,8 @@ def refuse_unmakeable(name: str, compare: str) -> None:
     either order of evaluate.architectures (a misspelt run or baseline): InputError naming its key,
     instead of a primary not measured."""
     from offroad_path.config.common import PRETRAININGS, model_names
-    from offroad_path.evaluate.uncertainty import EVERY_SCRATCH_VS_PRIOR, comparisons
+    from offroad_path.config.evaluate_schema import EVERY_SCRATCH_VS_PRIOR
+    from offroad_path.evaluate.uncertainty import comparisons
 
     grid = [f"{model}-{pretraining}" for model in model_names() for pretraining in PRETRAININGS()]
     pairs = comparisons(grid) + comparisons(grid[::-1])  # evaluate.architectures' order sets a pair's

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.config.evaluate_schema import EVERY_SCRATCH_VS_PRIOR
 from offroad_path.data.loading import load_maps
 from offroad_path.evaluate.against_pilotnet import SteeringComparison
 from offroad_path.evaluate.by_condition import ConditionTable, by_condition, read_conditions
@@ -28,7 +29,6 @@ from offroad_path.report.rendering import (
     temporal_markdown,
 )
 from offroad_path.report.tables import (
-    EVERY_SCRATCH_VS_PRIOR,
     PP_KEY,
     grid,
     markdown_table,

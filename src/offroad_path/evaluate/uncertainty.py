@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
+from offroad_path.config.evaluate_schema import EVERY_SCRATCH_VS_PRIOR
 from offroad_path.data.labels import read_label_run
 from offroad_path.data.manifest import Sample
 from offroad_path.data.splitting import block_of
@@ -22,7 +23,7 @@ from offroad_path.errors import InputError
 from offroad_path.evaluate.pixel_scores import pooled
 from offroad_path.evaluate.scored_set import TestSet
 from offroad_path.report.rendering import comparisons_markdown, seed_check_text
-from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR, PP_KEY, grid, method_title, split_run_name, title
+from offroad_path.report.tables import PP_KEY, grid, method_title, split_run_name, title
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.statistics.scores import SCORES, Score, iou
 from offroad_path.statistics.seed_check import FAILED_BELOW_MEDIAN, failed_seeds

@@ -7,9 +7,8 @@ from __future__ import annotations
 
 from math import nan
 
-from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS
+from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS, EVERY_SCRATCH_VS_PRIOR, PRIMARY_SECTIONS
 from offroad_path.report.tables import (
-    EVERY_SCRATCH_VS_PRIOR,
     PP_KEY,
     TITLES,
     TemporalRow,
@@ -119,7 +118,6 @@ def against_pilotnet_markdown(s: dict) -> str:
     return grid(["method", "MAE", "minus PilotNet [95 % interval]"], rows) + "\n"
 
 
-QUANTITY = {"uncertainty": "IoU", "steering_from_paths": "steering error"}  # what a primary compares; the drive's: interventions
 PRIMARIES_HEADER = ["primary", "claim", "a vs b", "estimate [Holm-corrected interval]", "p", "verdict"]
 
 
@@ -161,7 +159,7 @@ def _primary_row(v: Verdict, entry: dict) -> list[str]:
         shown += f" ({counts[0]} and {counts[1]} interventions)" if counts else ""
     else:
         shown = f"{i.estimate:+.3f} [{i.low:+.3f}, {i.high:+.3f}]"
-    quantity = QUANTITY.get(section, "interventions per km")
+    quantity = PRIMARY_SECTIONS[section]
     if v.negligible:
         verdict = f"no material difference (within ±{v.smallest_effect:g})"
     else:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import statistics
 
-from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS
+from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS, EVERY_SCRATCH_VS_PRIOR
 from offroad_path.report.rendering import (
     against_pilotnet_markdown,
     argument_markdown,
@@ -21,7 +21,7 @@ from offroad_path.report.rendering import (
     stress_markdown,
     temporal_markdown,
 )
-from offroad_path.report.tables import EVERY_SCRATCH_VS_PRIOR, grid
+from offroad_path.report.tables import grid
 from offroad_path.statistics.counts import power_sentence
 from offroad_path.statistics.seed_check import FAILED_BELOW_MEDIAN
 from offroad_path.steering.collapse import COLLAPSE_CORRELATION, COLLAPSE_SPREAD

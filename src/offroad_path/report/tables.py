@@ -10,6 +10,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 
+from offroad_path.config.evaluate_schema import EVERY_SCRATCH_VS_PRIOR
 from offroad_path.statistics.scores import SCORES, Record
 from offroad_path.statistics.scores import TITLES as SCORE_TITLES
 from offroad_path.world.groups import GROUPS
@@ -62,12 +63,6 @@ def method_title(run: str) -> str:
     """'unet-segmentation' -> 'U-Net (segmentation)': a run's name in every table."""
     model, pretraining = split_run_name(run)
     return f"{network_name(model)} ({pretraining})"
-
-
-# The paper's central claim as one comparison: every run without pretraining above the mean-path prior, an
-# intersection-union test (Berger 1982): it rejects when each run's own comparison rejects, so it is
-# answered by the weakest of them (the largest p-value; one at or below the prior when there is such a run).
-EVERY_SCRATCH_VS_PRIOR = "every_scratch_run_vs_mean_path_prior"
 
 
 def comparison_title(key: str, weakest: str = "") -> str:

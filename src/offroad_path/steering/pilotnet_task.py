@@ -9,11 +9,11 @@ angle as pure pursuit does, atan(its wheelbase x curvature) (drive.policies.Pilo
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import torch
 import torch.nn.functional as F
-from omegaconf import DictConfig
 from torchmetrics import MeanAbsoluteError
 
 from offroad_path.steering.pilotnet import PilotNet
@@ -29,7 +29,8 @@ class SteeringTask(BaseTask):
     monitor, mode = "val/mae", "min"
     loss_settings = "steering.lr, steering.momentum, steering.weight_decay"
 
-    # Hyper-parameters saved flat in the checkpoint; build one from config with from_config.
+    # Each argument is a hyper-parameter saved flat in the checkpoint, which the drive rebuilds the
+    # task from; conf/steering/default.yaml builds one through steering_task (its `_target_`).
     def __init__(  # noqa: PLR0913
         self,
         *,
@@ -51,19 +52,15 @@ class SteeringTask(BaseTask):
             raise ValueError(f"optimizer {optimizer!r}: valid {OPTIMIZERS}")
         super().__init__()
 
-    KEYS = ("width", "height", "lr", "lr_step_epochs", "lr_gamma", "momentum", "weight_decay")  # from the config as they are
-
-    @classmethod
-    def from_config(cls, s: DictConfig) -> SteeringTask:
-        """From the `steering` config node (conf/steering/default.yaml)."""
-        vehicle = {"lock_deg": s.lock_deg, "wheelbase_m": s.wheelbase_m} if s.target == "curvature" else {}
-        return cls(**{k: s[k] for k in cls.KEYS}, target=s.target, optimizer=s.optimizer, **vehicle)
-
     def configure_optimizers(self):
-        """sgd: the thesis's (momentum, the rate times lr_gamma every lr_step_epochs); adamw: AdamW
-        with a 5 % warm-up and a cosine to 0 over the run (the laptop's, as the path networks')."""
-        if self.hparams.optimizer == "sgd":
-            return sgd_with_step_decay(self)
+        """sgd: the thesis's (momentum, the rate times lr_gamma every lr_step_epochs epochs, 0: fixed);
+        adamw: AdamW with a 5 % warm-up and a cosine to 0 over the run (the laptop's, as the path
+        networks'). One builder for both tasks, training.task.optimizer_with_schedule."""
+        hp = self.hparams
+        if hp.optimizer == "sgd":
+            epochs, every = self.trainer.max_epochs, hp.lr_step_epochs
+            milestones = [k / epochs for k in range(every, epochs, every)] if every > 0 else []  # fractions of the run
+            return optimizer_with_schedule(self, "sgd", "step", warmup=0.0, milestones=milestones)
         return optimizer_with_schedule(self, "adamw", "cosine", warmup=0.05)
 
     @property
@@ -108,11 +105,17 @@ class SteeringTask(BaseTask):
         return loss
 
 
-def sgd_with_step_decay(task: BaseTask) -> dict | torch.optim.Optimizer:
-    """SGD with momentum and weight decay, the lr multiplied by lr_gamma every lr_step_epochs (0: fixed)."""
-    hp = task.hparams
-    optimizer = torch.optim.SGD(task.parameters(), lr=hp.lr, momentum=hp.momentum, weight_decay=hp.weight_decay)
-    if hp.lr_step_epochs <= 0:
-        return optimizer
-    scheduler = torch.optim.lr_scheduler.StepLR(optimizer, step_size=hp.lr_step_epochs, gamma=hp.lr_gamma)
-    return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+def steering_task(**node: object) -> SteeringTask:
+    """The task of conf/steering/default.yaml, its `_target_`: hydra.utils.instantiate(cfg.steering,
+    _convert_="all"). SteeringTask's arguments are taken from the node by name (its signature is the
+    one list of them); the node's other keys are the stage's (folders, batches, epochs, balance). The
+    recording vehicle's lock and wheelbase are hyper-parameters of a curvature PilotNet alone."""
+    names = set(inspect.signature(SteeringTask).parameters)
+    if node.get("target") != "curvature":
+        names -= {"lock_deg", "wheelbase_m"}
+    return SteeringTask(**{key: value for key, value in node.items() if key in names})
+
+
+def required_hyperparameters() -> list[str]:
+    """The arguments every SteeringTask is built with (a checkpoint of train_steering has them all)."""
+    return [name for name, p in inspect.signature(SteeringTask).parameters.items() if p.default is inspect.Parameter.empty]

@@ -11,6 +11,7 @@ from pathlib import Path
 import lightning as L
 import numpy as np
 import torch
+from hydra.utils import instantiate
 from lightning.pytorch.loggers import MLFlowLogger
 from omegaconf import DictConfig, OmegaConf
 
@@ -68,7 +69,7 @@ def fit_steering(cfg: DictConfig) -> dict:
         Path(steering.labels_dir), Path(steering.split_dir), cfg.split.block_m, cfg.split.guard_m, steering.mirror, steering=angles
     )
     data = SteeringDataModule(parts, steering, cfg.seed)
-    task = SteeringTask.from_config(steering)
+    task: SteeringTask = instantiate(steering, _convert_="all")
     outputs = ("out_dir", "metrics_path", "plots_path", "max_epochs", "cache_mb", "slip")
     settings = {
         "block_m": cfg.split.block_m,

@@ -192,7 +192,11 @@ def soft_dice_loss(scores: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 def optimizer_with_schedule(
-    task: L.LightningModule, optimizer: str | None = None, schedule: str | None = None, warmup: float | None = None
+    task: L.LightningModule,
+    optimizer: str | None = None,
+    schedule: str | None = None,
+    warmup: float | None = None,
+    milestones: list[float] | None = None,
 ):
     """SGD with momentum and weight decay (the paper's) or AdamW (decoupled weight decay), the rate
     ramped linearly from 0 over the first lr_warmup of the run's iterations, then either multiplied
@@ -200,11 +204,12 @@ def optimizer_with_schedule(
     (lr_schedule cosine; Loshchilov & Hutter 2017), in fractions of the run's iterations: max_steps
     when set, else max_epochs x batches per epoch (Lightning's estimated_stepping_batches). The paper
     says only "a step function" for SegNet: its milestones, like the laptop's recipe, are this
-    project's choice (conf/model/). `optimizer`, `schedule` and `warmup` stand in for hyper-parameters
-    a task does not have (PilotNet's)."""
+    project's choice (conf/model/). `optimizer`, `schedule`, `warmup` and `milestones` stand in for
+    hyper-parameters a task does not have (PilotNet's). The one optimiser builder of both tasks."""
     hp = task.hparams
     optimizer, schedule = optimizer or hp.optimizer, schedule or hp.lr_schedule
-    warmup, milestones = hp.get("lr_warmup", 0.0) if warmup is None else warmup, hp.get("lr_milestones", [])
+    warmup = hp.get("lr_warmup", 0.0) if warmup is None else warmup
+    milestones = hp.get("lr_milestones", []) if milestones is None else milestones
     if optimizer == "adamw":
         optimizer = torch.optim.AdamW(task.parameters(), lr=hp.lr, weight_decay=hp.weight_decay)
     else:
