@@ -185,7 +185,7 @@ def tiny_repo(repo: Path) -> Path:
     # The tour's preset (conf/experiment/tour.yaml: 12 frames of two drives and a test world, one epoch),
     # with one thread per stage, since two pipelines run at once (tests/repository/test_pipeline_dvc.py).
     tiny = yaml.safe_load((ROOT / "conf" / "experiment" / "tour.yaml").read_text()) | {"threads": 1, "experiment_name": "tiny"}
-    del tiny["evaluate"]["architectures"]  # every network of the grid, as conf/evaluate/default.yaml lists them
+    del tiny["evaluate"]["architectures"]  # every network of the grid, as conf/evaluate/networks.yaml lists them
     del tiny["mlflow"]  # the default experiment, which the notebooks read (their config is the checkout's)
     (repo / "conf" / "experiment" / "tiny.yaml").write_text("# @package _global_\n" + yaml.safe_dump(tiny))
     primary = repo / "conf" / "config.yaml"

@@ -1,6 +1,6 @@
 """The scaled pipelines: the main dvc.yaml's stages under a preset, every output under a folder of their own.
 
-    python tools/scaled_pipeline.py    # rewrites gpu/, tour/ and rehearsal/dvc.yaml from dvc.yaml, and their params.yaml
+    python tools/scaled_pipeline.py    # rewrites gpu/, tour/ and rehearsal/dvc.yaml from dvc.yaml, their params.yaml, and conf/evaluate/networks.yaml
     dvc repro gpu/dvc.yaml             # the whole pipeline at the GPU preset's sizes
     dvc repro tour/dvc.yaml            # the five-minute tour: every stage on tiny worlds (a smoke run)
     dvc repro rehearsal/dvc.yaml       # the GPU preset's settings at the tour's sizes, on any machine
@@ -9,7 +9,9 @@ One pipeline to edit (dvc.yaml); these files are made from it (tests/config/test
 are up to date): each stage runs in the checkout (wdir ..) with `experiment=<preset> paths.root=<folder>`,
 reads the checkout's code and configs and conf/experiment/<preset>.yaml (and the presets it is made of), and writes <folder>/data/ and
 <folder>/metrics/, so the committed run stays as it is. The grid lists come from <folder>/params.yaml,
-made from the composed preset (its networks, pretrainings and seeds).
+made from the composed preset (its networks, pretrainings and seeds). Every pipeline's networks are
+the model registry's (offroad_path.models.MODELS), written in its order to conf/evaluate/networks.yaml,
+which the main dvc.yaml's grid and the config's `evaluate.architectures` read.
 """
 
 from __future__ import annotations
@@ -80,7 +82,19 @@ def grid(folder: str) -> str:
     )
 
 
+def networks() -> str:
+    """conf/evaluate/networks.yaml: evaluate.architectures, the model registry's networks in its order."""
+    from offroad_path.models import MODELS
+
+    return (
+        "# Made by `python tools/scaled_pipeline.py` from the model registry (offroad_path.models.MODELS): edit that, then\n"
+        "# rerun it. The laptop pipeline's networks, in the registry's order (the first of a compared pair is a).\n"
+        + yaml.safe_dump({"architectures": list(MODELS)}, default_flow_style=None, sort_keys=False)
+    )
+
+
 def main() -> None:
+    (ROOT / "conf" / "evaluate" / "networks.yaml").write_text(networks())
     for folder in PIPELINES:
         (ROOT / folder / "dvc.yaml").write_text(render(folder))
         (ROOT / folder / "params.yaml").write_text(grid(folder))

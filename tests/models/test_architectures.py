@@ -1,6 +1,7 @@
 """One list of networks: the registry (offroad_path.models.MODELS) is the truth, the pipeline's
-grid (conf/evaluate/default.yaml, dvc.yaml's `vars`) follows it, and adding a network is its
-module, one registry line, its config file and its name in the grid (docs/design.md, "Adding a network")."""
+grid (conf/evaluate/networks.yaml, which dvc.yaml's `vars` and evaluate.architectures read) is made
+from it, and adding a network is its module, one registry line and its config file, then
+`python tools/scaled_pipeline.py` (docs/extending.md, "Adding a network")."""
 
 from __future__ import annotations
 
@@ -18,11 +19,14 @@ from torch import nn
 from offroad_path.models import MODELS, SegmentationNet
 from offroad_path.train import train
 
-GRID = yaml.safe_load((ROOT / "conf" / "evaluate" / "default.yaml").read_text())
 
 
 def test_the_grid_lists_every_registered_network_and_each_has_a_config():
-    assert GRID["architectures"] == list(MODELS), "conf/evaluate/default.yaml `architectures` must list the registry's networks"
+    from scaled_pipeline import networks
+
+    made = (ROOT / "conf" / "evaluate" / "networks.yaml").read_text()
+    assert made == networks(), "conf/evaluate/networks.yaml is stale: python tools/scaled_pipeline.py"
+    assert yaml.safe_load(made)["architectures"] == list(MODELS)
     configs = {p.stem: yaml.safe_load(p.read_text())["name"] for p in (ROOT / "conf" / "model").glob("*.yaml")}
     assert configs == {name: name for name in MODELS}, "each registered network has conf/model/<name>.yaml, and no other"
 
@@ -55,11 +59,13 @@ class TinyNet(SegmentationNet):
 
 
 def add_network_to(root: Path) -> None:
-    """What a user edits besides the module and the registry line: a config file and the grid."""
+    """What a user edits besides the module and the registry line (a config file), and the grid the
+    tool then makes from the registry."""
+    from scaled_pipeline import networks
+
     unet = (ROOT / "conf" / "model" / "unet.yaml").read_text()
     (root / "conf" / "model" / "tiny.yaml").write_text(unet.replace("name: unet", "name: tiny"))
-    grid = root / "conf" / "evaluate" / "default.yaml"
-    grid.write_text(grid.read_text().replace("architectures: [segnet, fcn, unet]", "architectures: [segnet, fcn, unet, tiny]"))
+    (root / "conf" / "evaluate" / "networks.yaml").write_text(networks())
 
 
 def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypatch, tmp_path, split_dir, tiny_overrides):
@@ -74,6 +80,7 @@ def test_a_fourth_network_trains_and_joins_the_grid_with_no_other_edit(monkeypat
             "mlflow.enabled=false",
         ]
         cfg = compose("config", overrides=[*tiny_overrides, "model=tiny", *overrides])
+    assert cfg.evaluate.architectures == ["segnet", "fcn", "unet", "tiny"]
     assert "tiny-none" in cfg.evaluate.runs and "tiny-segmentation" in cfg.evaluate.runs
     assert 0 <= train(cfg)["test/iou"] <= 1
     assert (tmp_path / "run" / "checkpoints" / "best.ckpt").is_file()

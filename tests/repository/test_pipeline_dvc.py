@@ -25,7 +25,7 @@ GRID = ("unet",)
 @pytest.fixture
 def repo_copy(tmp_path) -> Path:
     repo = tiny_repo(tmp_path / "repo")
-    grid = repo / "conf" / "evaluate" / "default.yaml"
+    grid = repo / "conf" / "evaluate" / "networks.yaml"
     text = grid.read_text()
     assert "architectures: [segnet, fcn, unet]\n" in text
     grid.write_text(text.replace("architectures: [segnet, fcn, unet]\n", f"architectures: [{', '.join(GRID)}]\n"))
