@@ -25,9 +25,12 @@ import pytest
 import yaml
 from common import tagged_processes  # noqa: F401  (benchmarks/common.py: the tests' import of it)
 
+from offroad_path.inference.path_filter import PostprocessParams
 from offroad_path.stage import run_stage
 
 ROOT = Path(__file__).resolve().parents[1]
+# Holder & Breckon's post-processing (the postprocess stage's config and the path filter's tests)
+PAPER_POSTPROCESSING = PostprocessParams(max_depth_m=20.0, sigma=6.0, delta=0.025, use_depth=True, unknown_depth="keep")
 
 
 def snapshot(root: Path) -> dict[str, str]:

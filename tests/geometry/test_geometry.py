@@ -1,4 +1,4 @@
-"""The shared helpers: distance along the path, mirroring, and the path overlay, against hand-computed values."""
+"""The shared helpers: distance along the path, a label's end, mirroring, exact solves, against hand-computed values."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from offroad_path.geometry.path import distance_along, label_end, mirror, path_length
-from offroad_path.viz import OUTLINE, overlay
 
 
 def test_distance_along_positions_and_poses():
@@ -31,20 +30,6 @@ def test_mirror_flips_left_right_and_is_contiguous():
     flipped = mirror(image)
     assert flipped.flags.c_contiguous and np.array_equal(flipped[:, 0], image[:, 3])
     assert np.array_equal(mirror(flipped), image)
-
-
-def test_overlay_blends_the_path_toward_green_and_leaves_the_rest():
-    image = np.full((20, 30, 3), 100, np.uint8)
-    path = np.zeros((20, 30), bool)
-    path[5:15, 10:20] = True
-    plain = overlay(image, path, alpha=0.5, outline=False)
-    assert (plain[path] == [50, 178, 50]).all()  # rint(0.5 * 100 + 0.5 * (0, 255, 0))
-    assert (plain[~path] == 100).all()
-    outlined = overlay(image, path, alpha=0.5)
-    red, green, blue = outlined[5, 12].astype(int)  # the border, drawn anti-aliased in yellow
-    assert red > 200 and green > 200 and blue < 40 and OUTLINE == (255, 255, 0)
-    assert (outlined[10, 15] == [50, 178, 50]).all()
-    assert (outlined[0, 0] == 100).all()
 
 
 def test_the_blas_free_solve_and_power_agree_with_numpys():

@@ -20,7 +20,6 @@ from offroad_path.models import MODELS, SegmentationNet
 from offroad_path.train import train
 
 
-
 def test_the_grid_lists_every_registered_network_and_each_has_a_config():
     from scaled_pipeline import networks
 

@@ -1,9 +1,8 @@
-"""predict on a folder, a sequence and a video; ONNX export of every architecture; clear errors."""
+"""predict on a folder, a sequence and a video, and with the exported model; clear errors."""
 
 from __future__ import annotations
 
 import shutil
-import sys
 from pathlib import Path
 
 import cv2
@@ -12,11 +11,8 @@ import pytest
 import torch
 from helpers import command
 
-from offroad_path.errors import InputError
 from offroad_path.export import run_export
-from offroad_path.export.onnx_export import export_onnx
 from offroad_path.geometry.stereo import compute_disparity, depth_from_disparity, sgbm
-from offroad_path.models import MODELS, build_model
 from offroad_path.predict import run_predict
 from offroad_path.predict.frame_sources import open_source
 from offroad_path.sequence.reader import open_sequence
@@ -104,14 +100,6 @@ def test_predict_on_a_video_and_from_an_mlflow_run(compose_config, trained, fram
     assert (tmp_path / "out" / "overlay.mp4").stat().st_size > 0
 
 
-@pytest.mark.parametrize("model", sorted(MODELS))
-@pytest.mark.slow(seconds=9)
-def test_onnx_export_agrees_with_pytorch(model, tmp_path):
-    torch.manual_seed(0)
-    difference = export_onnx(build_model(model, 2, 0.125), 128, 72, tmp_path / f"{model}.onnx")
-    assert difference < 1e-4
-
-
 @pytest.mark.slow(seconds=6)
 def test_predict_runs_the_exported_model_like_the_checkpoint(compose_config, trained, frames, tmp_path):
     folder = tmp_path / "images"
@@ -151,10 +139,3 @@ def test_predict_without_an_input_says_what_to_give(trained):
     run = command("offroad_path.predict", f"predict.checkpoint={trained[0]}")
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1] == "error: predict.input is required: give it on the command line, predict.input=..."
-
-
-def test_export_without_the_onnx_extra_says_which_extra_to_install(tmp_path, monkeypatch):
-    monkeypatch.setitem(sys.modules, "onnxruntime", None)  # as if `pip install -e .` without [onnx]
-    with pytest.raises(InputError, match=r"needs the \[onnx\] extra \(onnxruntime is not installed\)"):
-        export_onnx(build_model("unet", 2, 0.125), 128, 72, tmp_path / "unet.onnx")
-    assert not (tmp_path / "unet.onnx").exists()

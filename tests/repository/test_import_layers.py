@@ -141,3 +141,12 @@ def test_every_stage_is_a_package_named_as_its_command():
         assert len((PACKAGE / stage / "__main__.py").read_text().splitlines()) <= 5, f"{stage}/__main__.py: only the call of main"
     top = sorted(p.stem for p in PACKAGE.glob("*.py"))
     assert top == ["__init__", "errors", "looks", "stage"]
+
+
+def test_every_package_has_its_tests_folder():
+    """The tests mirror the packages: tests/<package>/ holds a test file for each package of offroad_path,
+    so that a unit's tests are found where its code is (the shared top-level modules' in tests/stage/)."""
+    tests = PACKAGE.parents[1] / "tests"
+    packages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
+    missing = [name for name in packages if not any((tests / name).glob("test_*.py"))]
+    assert missing == [], f"packages without tests/<package>/test_*.py: {', '.join(missing)}"

@@ -2,26 +2,17 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from dataclasses import replace
 
 import cv2
 import numpy as np
 import pytest
+from helpers import PAPER_POSTPROCESSING as PAPER
 
-from offroad_path.inference.path_filter import PostprocessParams, blur, nearest_to_bottom_centre, postprocess
+from offroad_path.inference.path_filter import blur, nearest_to_bottom_centre, postprocess
 
 H, W = 96, 160
 NEAR = np.full((H, W), 5.0, np.float32)  # every pixel 5 m away: the depth mask keeps all
-PAPER = PostprocessParams(max_depth_m=20.0, sigma=6.0, delta=0.025, use_depth=True, unknown_depth="keep")  # Holder & Breckon's
-
-
-def test_the_config_holds_the_papers_values(compose_config):
-    paper = PostprocessParams.from_config(compose_config("experiment=paper").postprocess)
-    assert replace(paper, blur_scale=1) == PAPER and paper.blur_scale == 2  # the blur at half resolution, bounded below
-    laptop = compose_config()  # the paper's sigma in pixels of its 512-pixel-wide images, at the laptop world's width
-    assert PostprocessParams.from_config(laptop.postprocess) == replace(paper, sigma=6.0 * laptop.world.width / 512)
 
 
 def network_like_map(seed: int, h: int = 288, w: int = 512) -> tuple[np.ndarray, np.ndarray]:
@@ -161,11 +152,3 @@ def test_unknown_depth_is_kept_by_the_papers_rule_and_dropped_on_request():
     reference = blurred(np.where(depth > 0, c, 0))
     assert dropped[70, 62] < 0.5 < kept[70, 62]  # deep inside the hole: the blurred zeros
     np.testing.assert_allclose(dropped[70, 95], reference[70, 95], atol=1e-6)
-
-
-def test_the_postprocess_stage_starts_without_torch():
-    # Six postprocess stages run in the laptop pipeline; torch's and albumentations' imports were
-    # about 3 of each one's 4.8 s (benchmarks/README.md). The file readers live in data/loading.py for this.
-    check = "import sys, offroad_path.postprocess; print(sorted({'torch', 'albumentations', 'lightning'} & set(sys.modules)))"
-    run = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, check=True)
-    assert run.stdout.strip() == "[]"
