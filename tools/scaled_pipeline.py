@@ -1,6 +1,6 @@
 """The scaled pipelines: the main dvc.yaml's stages under a preset, every output under a folder of their own.
 
-    python tools/scaled_pipeline.py    # rewrites gpu/, tour/ and rehearsal/dvc.yaml from dvc.yaml, their params.yaml, and conf/evaluate/networks.yaml
+    python tools/scaled_pipeline.py    # rewrites conf/evaluate/networks.yaml, and gpu/, tour/ and rehearsal/dvc.yaml and params.yaml
     dvc repro gpu/dvc.yaml             # the whole pipeline at the GPU preset's sizes
     dvc repro tour/dvc.yaml            # the five-minute tour: every stage on tiny worlds (a smoke run)
     dvc repro rehearsal/dvc.yaml       # the GPU preset's settings at the tour's sizes, on any machine

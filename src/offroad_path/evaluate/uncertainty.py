@@ -22,7 +22,7 @@ from offroad_path.data.splitting import block_of
 from offroad_path.errors import InputError
 from offroad_path.evaluate.pixel_scores import pooled
 from offroad_path.evaluate.scored_set import TestSet
-from offroad_path.report.rendering import comparisons_markdown, seed_check_text
+from offroad_path.report.rendering import bootstrap_method, comparisons_markdown, seed_check_text
 from offroad_path.report.tables import PP_KEY, grid, method_title, split_run_name, title
 from offroad_path.statistics.bootstrap import Draws, Interval, Resampling, block_sums, paired_draws, score_draws, worlds_of
 from offroad_path.statistics.scores import SCORES, Score, iou
@@ -160,12 +160,8 @@ class Uncertainty:
             return f"\n## Uncertainty\n\nThe test set is {self.blocks} block of {self.block_m:g} m of driving: no interval can be drawn.\n"
         lines = [
             "\n## Uncertainty\n",
-            f"{r.level:.0%} percentile intervals from {r.count} hierarchical resamples (seed {r.seed}): the test set's "
-            f"{self.bootstrap.worlds} test worlds drawn with replacement, then within each drawn world its blocks of "
-            f"{self.block_m:g} m of driving ({self.blocks} in all), then the {len(self.seeds)} training seed(s); a comparison "
-            "scores both methods on the same draw (paired). The intervals cover which worlds and stretches of driving were "
-            "tested and which seeds trained the networks, not other worlds' looks (every test world is drawn from the same "
-            "generator). An interval that holds 0: no difference measured. These comparisons are exploratory except those "
+            bootstrap_method(r, self.bootstrap.worlds, self.blocks, self.block_m, len(self.seeds))
+            + " An interval that holds 0: no difference measured. These comparisons are exploratory except those "
             "evaluate.conclusions declares primary (the Primary questions section).\n",
         ]
         runs = list(dict.fromkeys(run for run, _ in self.intervals))

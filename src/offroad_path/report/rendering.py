@@ -23,7 +23,7 @@ from offroad_path.report.tables import (
     split_run_name,
     title,
 )
-from offroad_path.statistics.bootstrap import Interval
+from offroad_path.statistics.bootstrap import Interval, Resampling
 from offroad_path.statistics.primaries import Verdict, verdicts
 from offroad_path.statistics.scores import SCORES
 
@@ -95,6 +95,23 @@ def comparisons_markdown(u: dict, skip: tuple[str, ...] = ()) -> str:
     )
     rows = [[comparison_title(key, weakest), difference.difference_text()] for key, difference in found]
     return grid(["comparison (IoU, a - b)", "difference [95 % interval]"], rows) + "\n" if found else ""
+
+
+def bootstrap_method(resampling: Resampling, worlds: int | str, blocks: int, block_m: float, seeds: int) -> str:
+    """How every interval of the evaluate stage is drawn, in one wording: evaluate's Uncertainty section
+    and the results pages (statistics.bootstrap; docs/conclusions.md)."""
+    return (
+        f"{100 * resampling.level:g} % hierarchical bootstrap ({resampling.count} resamples, seed {resampling.seed}): the "
+        f"{worlds} test worlds drawn with replacement, then within each drawn world its blocks of {block_m:g} m of driving "
+        f"({blocks} in all), then the {seeds} training seed(s); every compared method is scored on the same draw (paired), "
+        "each method's counts pooled over its seeds. Each interval is widened for the worlds and seeds it rests on (each "
+        "level's small-sample bias and Student's t with their Welch-Satterthwaite degrees of freedom, docs/conclusions.md): "
+        "where the seeds' spread is large, two seeds give a wide interval. The intervals cover which test worlds and "
+        "stretches of driving were tested, not other worlds' looks (every test world is drawn from the same generator); "
+        "which seeds trained the networks only in part, since a few seeds show little of the seed-to-seed spread, and a "
+        "rerun on another kind of CPU trains other bytes: a primary's smallest "
+        "effect of interest lies above how far a rerun moved it."
+    )
 
 
 def seed_check_text(failed: dict[str, list[int]], margin: float) -> str:

@@ -6,12 +6,16 @@ offroad_path.report.readme splices it into the two pages."""
 from __future__ import annotations
 
 import statistics
+from dataclasses import dataclass, field
+
+from omegaconf import DictConfig
 
 from offroad_path.config.evaluate_schema import DRIVE_ARGUMENTS, EVERY_SCRATCH_VS_PRIOR
 from offroad_path.report.rendering import (
     against_pilotnet_markdown,
     argument_markdown,
     baselines_markdown,
+    bootstrap_method,
     comparisons_markdown,
     conditions_markdown,
     fmt,
@@ -22,83 +26,87 @@ from offroad_path.report.rendering import (
     temporal_markdown,
 )
 from offroad_path.report.tables import grid
+from offroad_path.statistics.bootstrap import Resampling
 from offroad_path.statistics.counts import power_sentence
 from offroad_path.statistics.seed_check import FAILED_BELOW_MEDIAN
 from offroad_path.steering.collapse import COLLAPSE_CORRELATION, COLLAPSE_SPREAD
 
 
-def results_markdown(  # noqa: PLR0913
-    evaluation: dict,
-    label: dict,
-    steering: list[dict],
-    resamples: int,
-    *,
-    drive: dict | None = None,
-    conclusions=None,
-    full: bool = True,
-    temporal_alpha: float = 0.5,
-    variants: dict[str, list[dict]] | None = None,
-    timing: dict | None = None,
-    pipeline: str = "",
-) -> str:
-    """The results' body (between the markers) from the metrics files (steering: PilotNet's metrics per
-    training seed, the first seed first, each with its "seed"; drive.json: when there is one); resamples:
-    evaluate.bootstrap.resamples of the run that wrote them; conclusions: its evaluate.conclusions (the
-    primaries). full: every table (docs/results.md); else the README's summary: Table 5.1, the primaries,
-    the baselines and the stress sets. pipeline: a scaled pipeline's folder (gpu: `dvc repro
-    gpu/dvc.yaml` under experiment=gpu); empty for the committed laptop run."""
-    u = evaluation.get("uncertainty", {})
-    blocks, seeds = u.get("test_set", {}).get("blocks", 0), u.get("test_set", {}).get("seeds", 1)
-    worlds = u.get("test_set", {}).get("worlds", "n/a")
-    everything = evaluation.get("by_condition", {}).get("all", {})
-    out = [
-        _provenance(full, pipeline),
-        *([_timing_sentence(timing, pipeline)] if full and timing else []),
-        f"Labels: {label['labels']} from {label['sequences']} rendered sequences, {label['segments_dropped']} segments dropped; VO drift "
-        f"over 20 m segments {label['translation_drift_pct']:.2f} % (worst sequence {label['translation_drift_pct_worst']:.2f} %), "
-        f"{label['rotation_drift_deg_per_m']:.4f} deg/m"
-        + (
-            f"; the rig's disparity offset as the VO estimated it, {label['vo_disparity_offset_px_mean']:+.3f} px on average "
-            f"(largest {label['vo_disparity_offset_px_largest']:+.3f} px)"
-            if "vo_disparity_offset_px_mean" in label
-            else ""
-        )
-        + f". Test set: {everything.get('frames', 'n/a')} images (frames and their mirrored "
-        f"copies) from {everything.get('sequences', 'n/a')} held-out test sequences, {blocks} blocks of 20 m of driving; "
-        f"{seeds} training seed{'s' if seeds > 1 else ''} per network. Intervals: 95 % hierarchical bootstrap ({resamples} "
-        f"resamples): the {worlds} test worlds drawn with replacement, then the blocks within each drawn world, then the "
-        "training seeds, every compared method on the same draw, each method's counts pooled over its seeds; each interval "
-        f"widened for the {worlds} worlds and {seeds} seeds it rests on (each level's small-sample bias and Student's t with their "
-        "Welch-Satterthwaite degrees of freedom, docs/conclusions.md): where the seeds' spread is large, two seeds give a wide "
-        "interval. They cover "
-        "which test worlds and stretches of "
-        "driving were tested; which seeds trained the networks only in part, since a few seeds show little of the seed-to-seed "
-        "spread, and a rerun on another kind of CPU trains other bytes: a primary's smallest effect of interest lies above "
-        "how far a rerun moved it.\n",
-    ]
+@dataclass(frozen=True)
+class RunMetrics:
+    """One run's metrics files (metrics/, or a scaled pipeline's <folder>/metrics/) as the pages read them."""
+
+    evaluation: dict  # evaluation.json
+    label: dict  # label.json
+    steering: list[dict]  # PilotNet's metrics per training seed (steering/seed<k>.json), the first seed first, each with its "seed"
+    variants: dict[str, list[dict]] = field(default_factory=dict)  # the drive's other PilotNets (VARIANT_TITLES' folders), per seed
+    drive: dict | None = None  # drive.json, when the run drove
+    timing: dict | None = None  # pipeline_time.json
+
+
+def results_markdown(run: RunMetrics, e: DictConfig, block_m: float, *, full: bool = True, pipeline: str = "") -> str:
+    """The results' body (between the markers) from one run's metrics; e: the evaluate config of the run
+    that wrote them (its bootstrap, its primaries, its temporal filter); block_m: its split's. full:
+    every table (docs/results.md); else the README's summary: Table 5.1, the primaries, the baselines
+    and the stress sets. pipeline: a scaled pipeline's folder (gpu: `dvc repro gpu/dvc.yaml` under
+    experiment=gpu); empty for the committed laptop run."""
+    evaluation, u = run.evaluation, run.evaluation.get("uncertainty", {})
+    out = [_provenance(full, pipeline)]
+    if full and run.timing:
+        out.append(_timing_sentence(run.timing, pipeline))
+    out.append(f"{_labels(run.label)} {_test_set(evaluation, e.bootstrap, block_m)}\n")
     out += [
         results_table_markdown(evaluation, heading=""),
         *([seed_check_text(u["failed_seeds"], FAILED_BELOW_MEDIAN) + "\n"] if "failed_seeds" in u else []),
-        primaries_markdown(conclusions, evaluation.get("primaries", {}) | (drive or {}).get("primaries", {})),
+        primaries_markdown(e.conclusions, evaluation.get("primaries", {}) | (run.drive or {}).get("primaries", {})),
     ]
     if "mean_path_prior" in evaluation.get("baselines", {}):
         out += [baselines_markdown(evaluation, heading=""), ""]
-    if check := pilotnet_check(steering):
-        out.append(check)
-    for folder, seeds in (variants or {}).items():
-        if check := pilotnet_check(seeds, VARIANT_TITLES.get(folder, folder)):
+    for folder, seeds in {"": run.steering, **run.variants}.items():
+        if check := pilotnet_check(seeds, VARIANT_TITLES.get(folder, "")):
             out.append(check)
     out.append(stress_markdown(evaluation.get("stress_sets", {}), heading="Stress sets (exploratory). "))
     if full:
         if table := comparisons_markdown(u, skip=(EVERY_SCRATCH_VS_PRIOR,)):  # the central claim: a primary, above
             out += ["Exploratory comparisons, not corrected for multiplicity (paired: both on the same draws):\n", table]
-        out += _steering(evaluation, steering)
+        out += _steering(evaluation, run.steering)
         if c := evaluation.get("by_condition"):
             out += [conditions_markdown(c, heading=""), ""]
         if t := evaluation.get("temporal"):
-            out += [temporal_markdown(t, temporal_alpha, heading=""), ""]
-        out += _driving(drive or {}, conclusions)
+            out += [temporal_markdown(t, e.temporal.alpha, heading=""), ""]
+        out += _driving(run.drive or {}, e.conclusions)
     return "\n".join(out).rstrip("\n") + "\n"
+
+
+LABELS = (
+    "Labels: {labels} from {sequences} rendered sequences, {segments_dropped} segments dropped; VO drift over 20 m segments "
+    "{translation_drift_pct:.2f} % (worst sequence {translation_drift_pct_worst:.2f} %), {rotation_drift_deg_per_m:.4f} deg/m"
+)
+DISPARITY = (
+    "; the rig's disparity offset as the VO estimated it, {vo_disparity_offset_px_mean:+.3f} px on average "
+    "(largest {vo_disparity_offset_px_largest:+.3f} px)"
+)
+TEST_SET = (
+    "Test set: {frames} images (frames and their mirrored copies) from {sequences} held-out test sequences, {blocks} blocks "
+    "of {block_m:g} m of driving; {seeds} training seed{plural} per network. Intervals: "
+)
+
+
+def _labels(label: dict) -> str:
+    """The label stage's sentence (label.json): labels, dropped segments, the VO's drift (and its disparity offset)."""
+    return LABELS.format(**label) + (DISPARITY.format(**label) if "vo_disparity_offset_px_mean" in label else "") + "."
+
+
+def _test_set(evaluation: dict, bootstrap: DictConfig, block_m: float) -> str:
+    """The main test set's size and how its intervals are drawn (the one wording of report.rendering.bootstrap_method)."""
+    test_set = evaluation.get("uncertainty", {}).get("test_set", {})
+    blocks, seeds, worlds = test_set.get("blocks", 0), test_set.get("seeds", 1), test_set.get("worlds", "n/a")
+    everything = evaluation.get("by_condition", {}).get("all", {})
+    resampling = Resampling(bootstrap.resamples, bootstrap.seed, bootstrap.level)
+    sizes = {"frames": everything.get("frames", "n/a"), "sequences": everything.get("sequences", "n/a"), "blocks": blocks}
+    return TEST_SET.format(**sizes, block_m=block_m, seeds=seeds, plural="s" if seeds > 1 else "") + bootstrap_method(
+        resampling, worlds, blocks, block_m, seeds
+    )
 
 
 HEADLINE = (
