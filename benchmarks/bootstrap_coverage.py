@@ -24,6 +24,7 @@ import time
 import numpy as np
 from common import positive_int
 
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.statistics.bootstrap import Draws, Resampling, paired_draws, score_draws
 from offroad_path.statistics.scores import iou
 
@@ -65,8 +66,7 @@ def main() -> None:
     truth = 0.62 / 0.92 - 0.6 / 0.9 if args.paired else 0.6 / 0.9
     kind = "paired differences" if args.paired else "scores"
     print(f"{kind}: {args.worlds} worlds x {args.seeds} seeds, {args.trials} trials, nominal {args.level:.0%}\n")
-    print("| world sd | block sd | seed sd | hierarchical, widened | hierarchical, percentile | blocks only | seconds |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print(grid_head(["world sd", "block sd", "seed sd", "hierarchical, widened", "hierarchical, percentile", "blocks only", "seconds"]))
     for world_sd, block_sd, seed_sd in SETTINGS:
         start, widened, plain, flat = time.perf_counter(), 0, 0, 0
         for trial in range(args.trials):
@@ -85,8 +85,8 @@ def main() -> None:
             flat_interval = blocks_only.interval()  # every block its own world
             flat += flat_interval.low <= truth <= flat_interval.high
         n = args.trials
-        print(f"| {world_sd:g} | {block_sd:g} | {seed_sd:g} | {widened / n:.1%} | {plain / n:.1%} | {flat / n:.1%} | "
-              f"{time.perf_counter() - start:.1f} |")  # fmt: skip
+        rates = [f"{widened / n:.1%}", f"{plain / n:.1%}", f"{flat / n:.1%}"]
+        print(grid_row([f"{world_sd:g}", f"{block_sd:g}", f"{seed_sd:g}", *rates, f"{time.perf_counter() - start:.1f}"]))
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from offroad_path.config import load_config
 from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.odometry.perturb import jittered
 from offroad_path.odometry.sequence_trajectory import drift, run_odometry
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.sequence import open_sequence
 from offroad_path.sequence.reader import Sequence
 
@@ -51,14 +52,14 @@ def main() -> None:
     cv2.setNumThreads(1)
     cfg = OdometryConfig(**OmegaConf.to_container(load_config(*args.set).label.odometry, resolve=True))
     print(f"odometry {cfg.method}, {args.draws} draws up to {args.scale:g} of each value")
-    print("| sequence | drift as given | range over the draws | spread (points) |\n| --- | --- | --- | --- |")
+    print(grid_head(["sequence", "drift as given", "range over the draws", "spread (points)"]))
     for root in args.sequences:
         sequence = open_sequence(root)
         rng = np.random.default_rng(0)
         given = drift_pct(sequence, cfg)
         drawn = [drift_pct(perturbed(sequence, args.scale, rng), cfg) for _ in range(args.draws)]
         spread = max([given, *drawn]) - min([given, *drawn])
-        print(f"| {root} | {given:.3f} % | {min(drawn):.3f} to {max(drawn):.3f} % | {spread:.3f} |", flush=True)
+        print(grid_row([root, f"{given:.3f} %", f"{min(drawn):.3f} to {max(drawn):.3f} %", f"{spread:.3f}"]), flush=True)
 
 
 if __name__ == "__main__":

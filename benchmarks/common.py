@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import stats
 
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.statistics.scores import Scores
 
 if TYPE_CHECKING:
@@ -98,8 +99,8 @@ def compare(reference: dict, candidate: dict, margin: float = 0.02, mae_margin: 
           f"(reference {len(reference['prior'])}, candidate {len(candidate['prior'])})")  # fmt: skip
     prior = iou(candidate["prior"], keys)
     print(f"mean-path prior: {prior:.4f}; margin {margin} IoU (PilotNet: {mae_margin} MAE)\n")
-    print("| network | reference mean | candidate mean | paired differences (seeds in order) | mean ± sd | standard error | "
-          "one-sided 95 % bound | worst seed | admissible |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |")  # fmt: skip
+    print(grid_head(["network", "reference mean", "candidate mean", "paired differences (seeds in order)", "mean ± sd",
+                     "standard error", "one-sided 95 % bound", "worst seed", "admissible"]))  # fmt: skip
     admissible_all = True
     for model in reference["models"]:
         ref, new = reference["models"][model], candidate["models"][model]
@@ -118,9 +119,9 @@ def compare(reference: dict, candidate: dict, margin: float = 0.02, mae_margin: 
             label, worst_text = model, f"{worst:.4f}"
         admissible_all &= ok
         diffs = [b - a for a, b in zip(old_score, new_score, strict=True)]
-        print(f"| {label} | {statistics.mean(old_score):.4f} | {statistics.mean(new_score):.4f} | "
-              f"{', '.join(f'{d:+.3f}' for d in diffs)} | {mean_d:+.4f} ± {sd:.4f} | {se:.4f} | "
-              f"{bound:+.4f} | {worst_text} | {'yes' if ok else 'no'} |")  # fmt: skip
+        print(grid_row([label, f"{statistics.mean(old_score):.4f}", f"{statistics.mean(new_score):.4f}",
+                        ", ".join(f"{d:+.3f}" for d in diffs), f"{mean_d:+.4f} ± {sd:.4f}", f"{se:.4f}", f"{bound:+.4f}",
+                        worst_text, "yes" if ok else "no"]))  # fmt: skip
     return admissible_all
 
 

@@ -31,6 +31,7 @@ from offroad_path.config import load_config
 from offroad_path.config.label_schema import OdometryConfig
 from offroad_path.odometry.features import FrontEnd
 from offroad_path.odometry.sequence_trajectory import drift, run_odometry
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.sequence import find_sequences, open_sequence
 from offroad_path.sequence.misaligned import misaligned
 from offroad_path.utils.parallel import map_processes
@@ -86,10 +87,10 @@ def main() -> None:
     cfg = load_config(*args.set)
     if args.matcher:
         roots = [str(p) for p in find_sequences(args.in_dir)]
-        print("| rig offset (px) | matched minus true disparity: median (px) | corners |\n| --- | --- | --- |")
+        print(grid_head(["rig offset (px)", "matched minus true disparity: median (px)", "corners"]))
         for offset in args.offsets:
             found = np.concatenate(map_processes(matcher_offset, [(root, offset, dict(cfg.label.odometry)) for root in roots]))
-            print(f"| {offset:+.1f} | {np.median(found):+.3f} | {len(found)} |", flush=True)
+            print(grid_row([f"{offset:+.1f}", f"{np.median(found):+.3f}", f"{len(found)}"]), flush=True)
         return
     estimating = dict(cfg.label.odometry)
     fixed = estimating | {"disparity_offset_sigma_px": 0.0}
@@ -103,8 +104,12 @@ def main() -> None:
             sets["open world, 2 m per frame"] = [str(p) for p in find_sequences(tmp)]
         if (Path(args.kitti) / "calib.txt").is_file():
             sets["KITTI snippet (real)"] = [args.kitti]
-        print("| recordings | rig offset (px) | offset | drift over 20 m: mean, worst (%) | estimated offset: mean [min, max] (px) |")
-        print("| --- | --- | --- | --- | --- |", flush=True)
+        print(
+            grid_head(
+                ["recordings", "rig offset (px)", "offset", "drift over 20 m: mean, worst (%)", "estimated offset: mean [min, max] (px)"]
+            ),
+            flush=True,
+        )
         for title, roots in sets.items():
             for offset in args.offsets:
                 estimators = [("estimated", estimating)] if args.estimated_only else [("taken as 0", fixed), ("estimated", estimating)]
@@ -113,8 +118,8 @@ def main() -> None:
                     drifts = [d for d, _ in results]
                     found = np.array([o for _, o in results if o is not None])
                     estimate = f"{found.mean():+.3f} [{found.min():+.3f}, {found.max():+.3f}]" if len(found) else "-"
-                    print(f"| {title} ({len(roots)}) | {offset:+.1f} | {name} | {np.mean(drifts):.3f}, {max(drifts):.3f} | {estimate} |",
-                          flush=True)  # fmt: skip
+                    drift = f"{np.mean(drifts):.3f}, {max(drifts):.3f}"
+                    print(grid_row([f"{title} ({len(roots)})", f"{offset:+.1f}", name, drift, estimate]), flush=True)
 
 
 if __name__ == "__main__":

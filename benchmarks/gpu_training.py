@@ -26,6 +26,7 @@ import torch
 import torch.nn.functional as F
 
 from offroad_path.models import MODELS, build_model
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.world.render_torch import torch_device
 
 
@@ -97,17 +98,16 @@ def main() -> None:
     name = torch.cuda.get_device_name(device) if device.type == "cuda" else f"CPU, {torch.get_num_threads()} threads"
     print(f"{name}; width {args.width}, input {args.size}: training images/s ({args.seconds:g} s each)")
     figures: dict = {"device": name, "width": args.width, "size": args.size, "one_process": {}, "side_by_side": {}}
-    print("| network | " + " | ".join(f"batch {b}" for b in args.batches) + " |")
-    print("| --- |" + " --- |" * len(args.batches))
+    print(grid_head(["network", *(f"batch {b}" for b in args.batches)]))
     for model in args.models:
         rates = {b: images_per_s(model, b, args) for b in args.batches}
         figures["one_process"][model] = {str(b): round(r, 1) for b, r in rates.items()}
-        print(f"| {model} | " + " | ".join(f"{r:.0f}" for r in rates.values()) + " |", flush=True)
+        print(grid_row([model, *(f"{r:.0f}" for r in rates.values())]), flush=True)
     print(f"\n{args.models[0]}, batch {args.batches[0]}, processes side by side: images/s each and summed")
     for count in args.processes:
         each = side_by_side(args, count)
         figures["side_by_side"][str(count)] = {"each": [round(r, 1) for r in each], "sum": round(sum(each), 1)}
-        print(f"| {count} | {' '.join(f'{r:.0f}' for r in each)} | {sum(each):.0f} |", flush=True)
+        print(grid_row([count, f"{' '.join(f'{r:.0f}' for r in each)}", f"{sum(each):.0f}"]), flush=True)
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2) + "\n")
 

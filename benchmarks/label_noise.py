@@ -39,6 +39,7 @@ from offroad_path.evaluate.pixel_scores import counts, pooled
 from offroad_path.evaluate.uncertainty import HierarchicalBootstrap, sample_blocks
 from offroad_path.odometry.perturb import PoseError, drifted_poses, erroneous_poses
 from offroad_path.odometry.sequence_trajectory import drift
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.sequence.poses import poses_to_text, read_poses
 from offroad_path.sequence.reader import find_sequences, open_sequence
 from offroad_path.statistics.bootstrap import Resampling
@@ -140,9 +141,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         variants = pose_variants(args, true, training, tmp)
-        print("| labels from | translation drift over 20 m (%) | heading drift (deg/m) | training labels against exact (IoU) "
-              f"| U-Net test IoU, seeds {', '.join(map(str, args.seeds))} [95 %] | minus true poses [95 %] | seconds |\n"
-              "| --- | --- | --- | --- | --- | --- | --- |", flush=True)  # fmt: skip
+        test_iou = f"U-Net test IoU, seeds {', '.join(map(str, args.seeds))} [95 %]"
+        print(grid_head(["labels from", "translation drift over 20 m (%)", "heading drift (deg/m)", "training labels against exact (IoU)",
+                         test_iou, "minus true poses [95 %]", "seconds"]), flush=True)  # fmt: skip
         exact = tmp / "true_poses" / "labels"
         reference: np.ndarray | None = None
         for title, estimated in variants.items():
@@ -172,8 +173,8 @@ def main() -> None:
             rows.append({"labels": title, "translation_drift_pct": translation, "rotation_drift_deg_per_m": rotation,
                          "label_iou": agreement, "test_iou": score.estimate, "low": score.low, "high": score.high,
                          "minus_true": [gain.estimate, gain.low, gain.high]})  # fmt: skip
-            print(f"| {title} | {translation:.2f} | {rotation:.4f} | {agreement:.3f} | {score.text()} | {gain.difference_text()} | "
-                  f"{time.perf_counter() - start:.0f} |", flush=True)  # fmt: skip
+            print(grid_row([title, f"{translation:.2f}", f"{rotation:.4f}", f"{agreement:.3f}", score.text(), gain.difference_text(),
+                            f"{time.perf_counter() - start:.0f}"]), flush=True)  # fmt: skip
     print(json.dumps(rows))
     figure(rows, args.out)
 

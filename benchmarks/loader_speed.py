@@ -19,6 +19,7 @@ import torch
 from hydra.utils import instantiate
 
 from offroad_path.config import load_config
+from offroad_path.report.tables import grid_head, grid_row
 
 SIZES = {"laptop 128 x 72": (128, 72), "paper 512 x 288": (512, 288)}
 
@@ -45,13 +46,12 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=3)
     args = parser.parse_args()
     torch.set_num_threads(1)  # collation only; the workers' own threads are set by the loader
-    print("| input | workers | cache | first epoch, images/s | later epochs, images/s |")
-    print("| --- | --- | --- | --- | --- |")
+    print(grid_head(["input", "workers", "cache", "first epoch, images/s", "later epochs, images/s"]))
     for name, size in SIZES.items():
         for workers in (0, 1, 2):
             for cache_mb in (0, 2048):
                 first, later = rates(args.split_dir, size, workers, cache_mb, args.epochs)
-                print(f"| {name} | {workers} | {'on' if cache_mb else 'off'} | {first:.0f} | {later:.0f} |", flush=True)
+                print(grid_row([name, workers, f"{'on' if cache_mb else 'off'}", f"{first:.0f}", f"{later:.0f}"]), flush=True)
 
 
 if __name__ == "__main__":

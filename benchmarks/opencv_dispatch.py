@@ -16,6 +16,8 @@ import os
 import subprocess
 import sys
 
+from offroad_path.report.tables import grid_head, grid_row
+
 CALLS = """
 import hashlib, cv2, numpy as np
 rng = np.random.default_rng(0)
@@ -51,10 +53,9 @@ def main() -> None:
 
     print(f"OpenCV {cv2.__version__}; this CPU: {cv2.getCPUFeaturesLine()}")
     results = {name: hashes(disabled) for name, disabled in KERNEL_SETS.items()}
-    print("| call | " + " | ".join(results) + " |")
-    print("| --- |" + " --- |" * len(results))
+    print(grid_head(["call", *results]))
     for call in next(iter(results.values())):
-        print(f"| {call} | " + " | ".join(r[call] for r in results.values()) + " |")
+        print(grid_row([call, *(r[call] for r in results.values())]))
 
 
 if __name__ == "__main__":

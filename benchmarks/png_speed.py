@@ -15,6 +15,7 @@ from pathlib import Path
 
 import cv2
 
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.sequence.png import FAST_PNG
 
 OPTIONS = {
@@ -39,15 +40,14 @@ def main() -> None:
     args = parser.parse_args()
     cv2.setNumThreads(1)
     name = f"{args.frame:06d}.png"
-    print("| image | writer | encode, ms | decode, ms | KiB |")
-    print("| --- | --- | --- | --- | --- |")
+    print(grid_head(["image", "writer", "encode, ms", "decode, ms", "KiB"]))
     for kind in ("image_l", "depth", "semantic"):
         image = cv2.imread(str(Path(args.sequence) / kind / name), cv2.IMREAD_UNCHANGED)
         for label, options in OPTIONS.items():
             encoded = cv2.imencode(".png", image, options)[1]
             encode = per_call_ms(lambda image=image, options=options: cv2.imencode(".png", image, options), args.repeats)
             decode = per_call_ms(lambda encoded=encoded: cv2.imdecode(encoded, cv2.IMREAD_UNCHANGED), args.repeats)
-            print(f"| {kind} ({image.dtype}) | {label} | {encode:.2f} | {decode:.2f} | {len(encoded) / 1024:.0f} |")
+            print(grid_row([f"{kind} ({image.dtype})", label, f"{encode:.2f}", f"{decode:.2f}", f"{len(encoded) / 1024:.0f}"]))
 
 
 if __name__ == "__main__":

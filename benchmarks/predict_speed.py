@@ -22,6 +22,7 @@ import torch
 from offroad_path.export.onnx_export import PathConfidence, export_onnx
 from offroad_path.inference.runners import PathModel
 from offroad_path.models import MODELS, build_model
+from offroad_path.report.tables import grid_head, grid_row
 
 
 class Torch(PathModel):
@@ -60,8 +61,7 @@ def main() -> None:
     image = np.random.default_rng(0).integers(0, 256, (288, 512, 3), dtype=np.uint8)
     x = torch.randn(1, 3, h, w)
     print(f"torch threads {torch.get_num_threads()}, width {args.width}, input {w} x {h}, batch 1, ms per frame")
-    print("| network | PyTorch network | onnxruntime network | ratio | PyTorch predict frame | onnxruntime predict frame |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print(grid_head(["network", "PyTorch network", "onnxruntime network", "ratio", "PyTorch predict frame", "onnxruntime predict frame"]))
     for name in sorted(MODELS):
         torch.manual_seed(0)
         net = build_model(name, 2, args.width).eval()
@@ -73,7 +73,7 @@ def main() -> None:
             net_ox = per_frame(lambda ox=ox: ox.run(x), args.frames)
             frame_pt = per_frame(lambda pt=pt: pt([image]), args.frames)
             frame_ox = per_frame(lambda ox=ox: ox([image]), args.frames)
-        print(f"| {name} | {net_pt:.2f} | {net_ox:.2f} | {net_pt / net_ox:.2f}x | {frame_pt:.2f} | {frame_ox:.2f} |")
+        print(grid_row([name, f"{net_pt:.2f}", f"{net_ox:.2f}", f"{net_pt / net_ox:.2f}x", f"{frame_pt:.2f}", f"{frame_ox:.2f}"]))
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@ from pathlib import Path
 
 from common import BUSY
 
+from offroad_path.report.tables import grid_head, grid_row
+
 SETTINGS = ("free", "all", "1")
 
 
@@ -48,8 +50,7 @@ def main() -> None:
         subprocess.run([sys.executable, "-m", "offroad_path.export", f"model={model}", f"pretraining={args.run.split('-', 1)[1]}",
                         f"export.out={onnx}", "mlflow.enabled=false"], check=True, capture_output=True)  # fmt: skip
         checkpoints = {"onnxruntime": onnx, "PyTorch": Path("data") / "runs" / args.run / "seed0" / "checkpoints" / "best.ckpt"}
-        print("| machine | runtime | predict.threads | threads used | end to end, frames/s | in the model, frames/s |")
-        print("| --- | --- | --- | --- | --- | --- |")
+        print(grid_head(["machine", "runtime", "predict.threads", "threads used", "end to end, frames/s", "in the model, frames/s"]))
         for load in ("idle", "beside a busy torch process"):
             busy = subprocess.Popen([sys.executable, "-c", BUSY]) if load != "idle" else None
             try:
@@ -60,7 +61,7 @@ def main() -> None:
                         outs = [Path(tempfile.mkdtemp(dir=tmp)) / "out" for _ in range(args.repeats)]
                         runs = [predict(checkpoint, args.sequence, threads, out) for out in outs]
                         fps, model_fps, used = max(runs)
-                        print(f"| {load} | {runtime} | {threads} | {used} | {fps:.1f} | {model_fps:.1f} |", flush=True)
+                        print(grid_row([load, runtime, threads, used, f"{fps:.1f}", f"{model_fps:.1f}"]), flush=True)
             finally:
                 if busy is not None:
                     busy.kill()

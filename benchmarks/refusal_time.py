@@ -19,6 +19,8 @@ import sys
 import time
 from pathlib import Path
 
+from offroad_path.report.tables import grid_head, grid_row
+
 STAGES = ["synthesize", "label", "split", "pretrain", "train", "postprocess", "evaluate", "train_steering", "drive", "predict", "export"]
 CASES = {"--help": ["--help"], "--cfg job": ["--cfg", "job"], "bad key": ["bogus_key=1"], "bad value": ["threads=zero"]}
 
@@ -36,15 +38,14 @@ def main() -> None:
     parser.add_argument("--src", nargs="+", default=[str(Path(__file__).resolve().parents[1] / "src")])
     a = parser.parse_args()
     header = [f"{case} ({i})" if len(a.src) > 1 else case for case in CASES for i in range(1, len(a.src) + 1)]
-    print("| stage | " + " | ".join(header) + " |")
-    print("| --- |" + " ---: |" * len(header))
+    print(grid_head(["stage", *header]))
     for stage in STAGES:
         cells = []
         for args in CASES.values():
             for src in a.src:
                 runs = [seconds(stage, args, src) for _ in range(a.repeats)]
                 cells.append(f"{statistics.median(s for s, _ in runs):.1f}")
-        print(f"| {stage} | " + " | ".join(cells) + " |", flush=True)
+        print(grid_row([stage, *cells]), flush=True)
     for i, src in enumerate(a.src, start=1):
         print(f"({i}) {src}")
 

@@ -55,6 +55,7 @@ from common import PER_SEED, compare, iou, key, mae, merge, test_counts
 from offroad_path.data.loading import load_labels
 from offroad_path.data.manifest import read_manifest
 from offroad_path.evaluate.pixel_scores import counts, mean_path
+from offroad_path.report.tables import grid_head, grid_row
 
 SPLIT = Path("data/split")
 
@@ -120,7 +121,7 @@ def pipeline_run(args: argparse.Namespace, model: str, seed: int) -> Path | None
 
 def train_seeds(args: argparse.Namespace, yardstick: dict[str, str] | None) -> dict[str, dict]:
     """Each of args.models at each of args.seeds (with args.overrides), trained here unless the pipeline's run is given."""
-    print("| network | seed | test IoU (PilotNet: MAE) | epochs | seconds |\n| --- | --- | --- | --- | --- |")
+    print(grid_head(["network", "seed", "test IoU (PilotNet: MAE)", "epochs", "seconds"]))
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "split").mkdir()
@@ -149,7 +150,7 @@ def train_seeds(args: argparse.Namespace, yardstick: dict[str, str] | None) -> d
                 values = (seed, score, epochs, round(seconds, 1), per_frame)
                 for name, value in zip(PER_SEED, values, strict=True):
                     row[name].append(value)
-                print(f"| {model} | {seed} | {score:.4f} | {epochs} | {seconds:.0f} |", flush=True)
+                print(grid_row([model, seed, f"{score:.4f}", epochs, f"{seconds:.0f}"]), flush=True)
     return results
 
 
@@ -192,11 +193,11 @@ def main() -> None:
     results = train_seeds(args, yardstick)
     prior = prior_counts(yardstick, args.test_set)
     print(f"\nmean-path prior: {iou(prior, list(prior)):.4f}\n")
-    print("| network | mean IoU (PilotNet: MAE) | standard deviation | range |\n| --- | --- | --- | --- |")
+    print(grid_head(["network", "mean IoU (PilotNet: MAE)", "standard deviation", "range"]))
     for model, row in results.items():
         ious = row["score"]
         spread = statistics.stdev(ious) if len(ious) > 1 else float("nan")
-        print(f"| {model} | {statistics.mean(ious):.4f} | {spread:.4f} | {min(ious):.4f} to {max(ious):.4f} |")
+        print(grid_row([model, f"{statistics.mean(ious):.4f}", f"{spread:.4f}", f"{min(ious):.4f} to {max(ious):.4f}"]))
     if args.json:
         labels = str(args.labels_from) if args.labels_from else "own test labels"
         found = {"overrides": args.overrides, "labels": labels, "test_set": args.test_set, "pretraining": args.pretraining,

@@ -32,6 +32,7 @@ from torch.profiler import ProfilerActivity, profile
 from torch.utils.flop_counter import FlopCounterMode
 
 from offroad_path.models import build_model
+from offroad_path.report.tables import grid_head, grid_row
 
 SEEDS = 3
 
@@ -133,9 +134,8 @@ def main() -> None:
     torch.manual_seed(0)
     reach = conv_reach(args.steps)
     print(f"a 3x3 convolution 128 -> 128 at 128 x 128, batch 8, forward and backward: {reach:.1f} GFLOP/s on 2 threads\n")
-    print("| network | GFLOP per step | ms per step | GFLOP/s | share of the convolution's | 3 seeds as a batch of 18 | "
-          "3 seeds stacked (vmap) | 1 thread | 2 one-thread processes side by side |")  # fmt: skip
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print(grid_head(["network", "GFLOP per step", "ms per step", "GFLOP/s", "share of the convolution's", "3 seeds as a batch of 18",
+                     "3 seeds stacked (vmap)", "1 thread", "2 one-thread processes side by side"]))  # fmt: skip
     for name in args.models:
         x, y = torch.randn(6, 3, 72, 128), torch.randint(0, 2, (6, 72, 128))
         step = sgd_step(build_model(name, 2, 0.25), x, y)
@@ -144,9 +144,9 @@ def main() -> None:
         batch = timed(sgd_step(build_model(name, 2, 0.25), x.repeat(SEEDS, 1, 1, 1), y.repeat(SEEDS, 1, 1)), args.steps)
         stacked = timed(stacked_step(name, x, y), args.steps)
         alone, beside = one_thread_ms(name, args.steps, False), one_thread_ms(name, args.steps, True)
-        print(f"| {name} | {work:.2f} | {one * 1000:.0f} | {work / one:.1f} | {work / one / reach:.0%} | "
-              f"{batch / one / SEEDS:.2f}x three steps | {stacked / one / SEEDS:.2f}x three steps | {alone:.0f} ms | "
-              f"{beside:.0f} ms for two steps at once: {beside / 2 / (one * 1000):.2f}x a 2-thread step each |")  # fmt: skip
+        print(grid_row([name, f"{work:.2f}", f"{one * 1000:.0f}", f"{work / one:.1f}", f"{work / one / reach:.0%}",
+                        f"{batch / one / SEEDS:.2f}x three steps", f"{stacked / one / SEEDS:.2f}x three steps", f"{alone:.0f} ms",
+                        f"{beside:.0f} ms for two steps at once: {beside / 2 / (one * 1000):.2f}x a 2-thread step each"]))  # fmt: skip
     print("\nWhere a step's time goes (profiler self time):")
     for name in args.models:
         x, y = torch.randn(6, 3, 72, 128), torch.randint(0, 2, (6, 72, 128))

@@ -38,6 +38,7 @@ from scipy.stats import norm, t
 
 from offroad_path.config import load_config
 from offroad_path.data.labels import read_label_run
+from offroad_path.report.tables import grid_head, grid_row
 from offroad_path.statistics.bootstrap import two_level_factor
 from offroad_path.statistics.scores import Scores
 
@@ -184,34 +185,28 @@ def main() -> None:
     retired = json.loads(args.retired.read_text())
     assumed = {name: float(sd) for name, sd in (item.split("=") for item in args.assume_seed_sd)}
     found = from_retired(retired, assumed) | from_seed_runs(args.spread, cfg.split.block_m, Path(cfg.split.labels_dir))
-    print("| primary | estimate | world sd | block sd | seed sd | world x seed sd | measured on |\n" + "| --- " * 7 + "|")
+    print(grid_head(["primary", "estimate", "world sd", "block sd", "seed sd", "world x seed sd", "measured on"]))
     for name, c in found.items():
         where = (
             f"{c['worlds']} development worlds, {c['seeds']} seeds" if c["seeds"] else f"the retired run's interval ({c['worlds']} worlds)"
         )
         where += f"; seed sd assumed {assumed[name]:g}" if name in assumed else ""
-        sds = " | ".join(f"{math.sqrt(c[k]):.4f}" for k in ("world", "block", "seed", "world_x_seed"))
-        print(f"| {name} | {c['estimate']:+.4f} | {sds} | {where} |")
+        sds = [f"{math.sqrt(c[k]):.4f}" for k in ("world", "block", "seed", "world_x_seed")]
+        print(grid_row([name, f"{c['estimate']:+.4f}", *sds, where]))
     level = 1 - args.alpha / args.family
     rendered = {k: int(v) for k, v in (item.split("=") for item in args.rendered.split(","))}
     per_world, per_seed, rest = unit_costs(json.loads(args.times.read_text()), rendered, retired["uncertainty"]["test_set"]["seeds"])
     names = list(found)
     effects = ", ".join(f"{n} {PLANNING_EFFECT.get(n, args.effect):g}" for n in names)
     print(f"\nHalf-width at Holm's strictest level ({level:.4f}, family {args.family}) and power for the planning effect ({effects}):\n")
-    print(
-        "| worlds | seeds | "
-        + " | ".join(names)
-        + " | minutes on 2 cores |\n| --- | --- | "
-        + " | ".join("---" for _ in names)
-        + " | --- |"
-    )
+    print(grid_head(["worlds", "seeds", *names, "minutes on 2 cores"]))
     for w in args.worlds:
         for s in args.seeds:
             cells = []
             for name in names:
                 half, p = power(found[name], w, s, PLANNING_EFFECT.get(name, args.effect), level)
                 cells.append(f"±{half:.3f}, {100 * p:.0f} %")
-            print(f"| {w} | {s} | " + " | ".join(cells) + f" | {(rest + per_world * w + per_seed * s) / 60:.0f} |")
+            print(grid_row([w, s, *cells, f"{(rest + per_world * w + per_seed * s) / 60:.0f}"]))
     print(f"\nunit costs: {per_world:.0f} s per main test world, {per_seed:.0f} s per seed, {rest:.0f} s the rest (the retired run)")
 
 

@@ -17,6 +17,7 @@ import torch
 from common import step_ms
 
 from offroad_path.models import MODELS, build_model
+from offroad_path.report.tables import grid_head, grid_row
 
 
 def main() -> None:
@@ -30,8 +31,7 @@ def main() -> None:
     w, h = (int(v) for v in args.size.split("x"))
     default_threads = torch.get_num_threads()
     print(f"width {args.width}, input {w} x {h}, batch {args.batch}: ms per SGD step")
-    print("| network | threads | NCHW | channels-last | ratio |" + (" compiled | compile s |" if args.compile else ""))
-    print("| --- | --- | --- | --- | --- |" + (" --- | --- |" if args.compile else ""))
+    print(grid_head(["network", "threads", "NCHW", "channels-last", "ratio", *(["compiled", "compile s"] if args.compile else [])]))
     for name in sorted(MODELS):
         for threads in (default_threads, 1):
             torch.set_num_threads(threads)
@@ -41,14 +41,14 @@ def main() -> None:
             last = build_model(name, 2, args.width).to(memory_format=torch.channels_last)
             x_last = x.contiguous(memory_format=torch.channels_last)
             channels_last = step_ms(last, x_last, y, args.steps)
-            row = f"| {name} | {threads} | {nchw:.1f} | {channels_last:.1f} | {nchw / channels_last:.2f}x |"
+            row = [name, threads, f"{nchw:.1f}", f"{channels_last:.1f}", f"{nchw / channels_last:.2f}x"]
             if args.compile and threads == default_threads:
                 compiled = torch.compile(last)
                 start = time.perf_counter()
                 compiled(x_last).sum().backward()
                 compile_s = time.perf_counter() - start
-                row += f" {step_ms(compiled, x_last, y, args.steps):.1f} | {compile_s:.0f} |"
-            print(row, flush=True)
+                row += [f"{step_ms(compiled, x_last, y, args.steps):.1f}", f"{compile_s:.0f}"]
+            print(grid_row(row), flush=True)
     torch.set_num_threads(default_threads)
 
 

@@ -26,6 +26,8 @@ import cv2
 import numpy as np
 from common import label_recording
 
+from offroad_path.report.tables import grid_head, grid_row
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -74,14 +76,12 @@ def main() -> None:
     bends = np.bincount(np.array(frames.direction) + 1, minlength=3).tolist()
     blocks = len(set(frames.blocks))
     print(f"{args.recording.name}: {len(frames.labels)} labelled frames, {blocks} blocks, {bends} bending left, straight, right")
-    print("| method | IoU [95 %] | vs other frames' labels | label-centred gain [95 %] | far-end correlation [95 %] |")
-    print("| --- | --- | --- | --- | --- |")
+    print(grid_head(["method", "IoU [95 %]", "vs other frames' labels", "label-centred gain [95 %]", "far-end correlation [95 %]"]))
     for row in rows.values():
-        print(
-            f"| {row.method} | {row.iou:.3f} [{row.iou_low:.3f}, {row.iou_high:.3f}] | {row.non_corresponding_iou:.3f} | "
-            f"{row.gain:+.3f} [{row.gain_low:+.3f}, {row.gain_high:+.3f}] | "
-            f"{row.far_end:+.2f} [{row.far_end_low:+.2f}, {row.far_end_high:+.2f}] |"
-        )
+        iou = f"{row.iou:.3f} [{row.iou_low:.3f}, {row.iou_high:.3f}]"
+        gain = f"{row.gain:+.3f} [{row.gain_low:+.3f}, {row.gain_high:+.3f}]"
+        far_end = f"{row.far_end:+.2f} [{row.far_end_low:+.2f}, {row.far_end_high:+.2f}]"
+        print(grid_row([row.method, iou, f"{row.non_corresponding_iou:.3f}", gain, far_end]))
     if args.json:
         args.json.write_text(json.dumps({key: asdict(row) for key, row in rows.items()}, indent=2) + "\n")
 

@@ -26,6 +26,8 @@ from pathlib import Path
 
 from common import BUSY
 
+from offroad_path.report.tables import grid_head, grid_row
+
 HERE = Path(__file__).resolve().parent
 STEPS = """
 import hashlib, sys, torch
@@ -77,8 +79,7 @@ def main() -> None:
     parser.add_argument("--policies", default=",".join(POLICIES), help="comma-separated names of POLICIES")
     args = parser.parse_args()
     print(f"{args.model}, 128 x 72, batch 6, {args.threads} threads: ms per SGD step ({os.cpu_count()} cores)")
-    print("| OpenMP setting | alone | two at once (each) | beside a busy torch process | weights after the steps (SHA-256) |")
-    print("| --- | --- | --- | --- | --- |")
+    print(grid_head(["OpenMP setting", "alone", "two at once (each)", "beside a busy torch process", "weights after the steps (SHA-256)"]))
     for name in args.policies.split(","):
         policy = POLICIES[name]
         alone, weights = ms(start(policy, args))
@@ -93,7 +94,7 @@ def main() -> None:
             busy.wait()
         runs = {weights, beside[1], *(w for _, w in pair)}
         same = weights if len(runs) == 1 else "differ: " + ", ".join(sorted(runs))
-        print(f"| {name} | {alone:.1f} | {max(t for t, _ in pair):.1f} | {beside[0]:.1f} | {same} |", flush=True)
+        print(grid_row([name, f"{alone:.1f}", f"{max(t for t, _ in pair):.1f}", f"{beside[0]:.1f}", same]), flush=True)
 
 
 if __name__ == "__main__":

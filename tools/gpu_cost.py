@@ -24,6 +24,8 @@ from pathlib import Path
 
 import yaml
 
+from offroad_path.report.tables import grid_head, grid_row
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tools"), str(ROOT / "benchmarks")]
 MEASURED_DRIVES, MEASURED_FRAMES, MEASURED_BATCH = 16, 100, 32  # the H200 stage times' sizes: one epoch of 16 drives
@@ -213,18 +215,18 @@ def main() -> None:
     by_kind: dict[str, list[float]] = {}
     for stage, seconds in found["alone_s"].items():
         by_kind.setdefault(stage.split("@")[0], []).append(seconds)
-    print("| stage | stages | seconds each, alone | finished at (s) |\n| --- | --- | --- | --- |")
+    print(grid_head(["stage", "stages", "seconds each, alone", "finished at (s)"]))
     for kind, seconds in by_kind.items():
         end = max(e for stage, (_, e) in found["spans"].items() if stage.split("@")[0] == kind)
         each = f"{min(seconds):.0f}" if max(seconds) - min(seconds) < 1 else f"{min(seconds):.0f}-{max(seconds):.0f}"
-        print(f"| {kind} | {len(seconds)} | {each} | {end:.0f} |")
+        print(grid_row([kind, f"{len(seconds)}", each, f"{end:.0f}"]))
     print(
         f"\ninstall {found['install_s']:.0f} s + pipeline {found['pipeline_s']:.0f} s (--jobs {args.jobs}) + results page and archive "
         f"{found['report_s']:.0f} s = {found['total_s']:.0f} s ({found['total_s'] / 60:.1f} min)"
     )
     print("\n| primary | in the design | half-width | power |\n| --- | --- | --- | --- |")
     for name, role, half, p in power_rows(found["design"], found["components"]):
-        print(f"| {name} | {role} | ±{half:.3f} | {100 * p:.0f} % |")
+        print(grid_row([name, role, f"±{half:.3f}", f"{100 * p:.0f} %"]))
     if args.json:
         args.json.write_text(json.dumps({k: v for k, v in found.items() if k not in ("design", "components")}, indent=1) + "\n")
 

@@ -107,10 +107,19 @@ def _value(row, name: str):
 
 def grid(header: Sequence[str], rows: Iterable[Sequence[object]]) -> str:
     """The one Markdown table builder of every report table (README, docs/results.md, results.md,
-    the drive's): a header row, the separator and one row per cell list; no trailing newline."""
-    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
-    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
-    return "\n".join(lines)
+    the drive's) and of the benchmarks': a header row, the separator and one row per cell list; no
+    trailing newline. A benchmark that prints each row as it is measured prints grid_head, then grid_row."""
+    return "\n".join([grid_head(header), *(grid_row(row) for row in rows)])
+
+
+def grid_head(header: Sequence[str]) -> str:
+    """A table's header row and separator (grid's first two lines)."""
+    return "| " + " | ".join(header) + " |\n|" + " --- |" * len(header)
+
+
+def grid_row(cells: Sequence[object]) -> str:
+    """One row of a table (grid's)."""
+    return "| " + " | ".join(str(cell) for cell in cells) + " |"
 
 
 def markdown_table(rows: list) -> str:
