@@ -58,7 +58,9 @@ def test_a_development_set_of_one_world_is_refused_before_training(script, tmp_p
     assert not (tmp_path / "w").exists()
 
 
-@pytest.mark.parametrize("script", ["label_cpu.py", "learning_curve.py", "seed_spread.py", "pipeline_time.py", "gpu_training.py"])
+@pytest.mark.parametrize(
+    "script", ["label_cpu.py", "learning_curve.py", "seed_spread.py", "pipeline_time.py", "gpu_training.py", "suite_time.py"]
+)
 def test_help_prints_and_writes_nothing(script, tmp_path):
     """`--help` is help: once, a benchmark took it for its work folder and ran, writing into `./--help`."""
     run = command(str(ROOT / "benchmarks" / script), "--help", cwd=tmp_path)
