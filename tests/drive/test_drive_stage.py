@@ -7,13 +7,11 @@ from __future__ import annotations
 import json
 import shutil
 import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 import torch
-from helpers import refused
+from helpers import command, refused
 
 from offroad_path.drive import run_drive
 from offroad_path.steering.pilotnet_task import SteeringTask
@@ -96,15 +94,7 @@ def test_outputs_follow_the_contract(driven):
 
 @pytest.mark.slow(seconds=7)
 def test_an_unknown_policy_is_refused_before_anything_is_written(inputs, tmp_path):
-    cli = [
-        sys.executable,
-        "-m",
-        "offroad_path.drive",
-        *overrides(inputs, tmp_path),
-        "drive.arguments.vehicle=[unet-nothing]",
-        "mlflow.enabled=false",
-    ]
-    run = subprocess.run(cli, capture_output=True, text=True)
+    run = command("offroad_path.drive", *overrides(inputs, tmp_path), "drive.arguments.vehicle=[unet-nothing]", "mlflow.enabled=false")
     assert run.returncode == 2
     line = run.stderr.strip().splitlines()[-1]
     missing = inputs / "runs" / "unet-nothing" / "seed0" / "checkpoints" / "best.ckpt"
