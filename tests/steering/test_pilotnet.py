@@ -86,3 +86,40 @@ def test_the_collapse_check_flags_a_constant_and_a_zero_pilotnet_and_passes_an_u
     noisy = collapse_check(true, rng.normal(0, 0.4, 400), worlds)
     assert noisy["collapsed"] and noisy["collapse_reasons"] == ["correlation with the truth at or below 0.1"]
     assert not noisy["beats_straight_ahead"]
+
+
+def test_the_thesis_step_decay_multiplies_the_rate_every_lr_step_epochs():
+    """optimizer sgd: the rate times lr_gamma every lr_step_epochs epochs (the one optimiser builder's
+    step milestones), measured at each epoch's start of a real run of 5 epochs of 2 steps."""
+    import lightning as L
+    from torch.utils.data import DataLoader
+
+    from offroad_path.steering.pilotnet_task import SteeringTask
+
+    task = SteeringTask(width=200, height=66, lr=0.1, lr_step_epochs=2, lr_gamma=0.5, momentum=0.9, weight_decay=0.0, optimizer="sgd")
+    rates = []
+
+    class RateAtEpochStart(L.Callback):
+        def on_train_epoch_start(self, trainer: L.Trainer, module: L.LightningModule) -> None:
+            rates.append(trainer.optimizers[0].param_groups[0]["lr"])
+
+    frames = [{"image": torch.rand(3, 66, 200), "steering": torch.tensor(0.1)} for _ in range(2)]
+    trainer = L.Trainer(max_epochs=5, callbacks=[RateAtEpochStart()], logger=False, enable_checkpointing=False,
+                        enable_progress_bar=False, enable_model_summary=False, accelerator="cpu")  # fmt: skip
+    trainer.fit(task, DataLoader(frames, batch_size=1))
+    assert rates == pytest.approx([0.1, 0.1, 0.05, 0.05, 0.025])
+
+
+def test_the_steering_config_builds_its_task_by_instantiate(compose_config):
+    """conf/steering's `_target_` takes SteeringTask's arguments from the node by name: the config's
+    values, the vehicle's lock and wheelbase for a curvature PilotNet alone, and no stage setting."""
+    from hydra.utils import instantiate
+
+    from offroad_path.steering.pilotnet_task import SteeringTask, required_hyperparameters
+
+    angle = instantiate(compose_config("steering.lr=0.003").steering, _convert_="all")
+    assert isinstance(angle, SteeringTask) and angle.hparams.lr == 0.003 and angle.hparams.lock_deg is None
+    curvature = compose_config("steering.target=curvature")
+    task = instantiate(curvature.steering, _convert_="all")
+    assert (task.hparams.lock_deg, task.hparams.wheelbase_m) == (curvature.world.vehicle.max_steering_deg, curvature.world.vehicle.wheelbase_m)
+    assert set(required_hyperparameters()) <= set(task.hparams) and "batch_size" not in task.hparams
