@@ -121,5 +121,6 @@ def test_the_steering_config_builds_its_task_by_instantiate(compose_config):
     assert isinstance(angle, SteeringTask) and angle.hparams.lr == 0.003 and angle.hparams.lock_deg is None
     curvature = compose_config("steering.target=curvature")
     task = instantiate(curvature.steering, _convert_="all")
-    assert (task.hparams.lock_deg, task.hparams.wheelbase_m) == (curvature.world.vehicle.max_steering_deg, curvature.world.vehicle.wheelbase_m)
+    vehicle = curvature.world.vehicle
+    assert (task.hparams.lock_deg, task.hparams.wheelbase_m) == (vehicle.max_steering_deg, vehicle.wheelbase_m)
     assert set(required_hyperparameters()) <= set(task.hparams) and "batch_size" not in task.hparams
