@@ -253,7 +253,8 @@ def test_the_label_stage_writes_the_same_bytes_on_every_cpu_kernel_set(tmp_path)
     def label(name: str, env: dict[str, str]) -> dict[str, str]:
         out = tmp_path / name
         cli = [sys.executable, "-m", "offroad_path.label", f"label.in_dir={world}", f"label.out_dir={out / 'labels'}",
-               f"label.metrics_path={out / 'label.json'}", "label.distance_m=4", "label.stride_m=1", "mlflow.enabled=false",
+               f"label.metrics_path={out / 'label.json'}", "label.distance_m=4", "label.stride_m=1", "label.workers=1",
+               "mlflow.enabled=false",
                f"hydra.run.dir={tmp_path / 'h'}"]  # fmt: skip
         run = subprocess.run(cli, env={**os.environ, **env}, capture_output=True, text=True)
         assert run.returncode == 0, run.stderr[-2000:]
