@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 
+import pytest
 import yaml
 
 from offroad_path.train import train
@@ -25,6 +26,7 @@ def test_csv_logger_writes_each_metric_and_the_config(tiny_config, tmp_path):
     assert not (tmp_path / "mlflow.db").exists()  # the training run's only logger
 
 
+@pytest.mark.slow(seconds=5)  # a training run with W&B's offline writer: 4 s here, 8.8 s on a slower machine
 def test_wandb_logger_offline_records_the_run(tiny_config, tmp_path, monkeypatch):
     monkeypatch.setenv("WANDB_MODE", "offline")
     monkeypatch.setenv("WANDB_DIR", str(tmp_path / "logs"))

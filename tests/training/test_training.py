@@ -37,6 +37,7 @@ def write_vgg(path: Path, batch_norm: bool, width: float = 1.0) -> None:
     torch.save(state, path)
 
 
+@pytest.mark.slow(seconds=5)  # full-size VGG16 weights written and loaded: 4 to 5 s here, over the budget on slower machines
 def test_imagenet_weights_load_into_every_encoder_layer(tmp_path):
     write_vgg(tmp_path / "vgg16_bn.pth", batch_norm=True)
     segnet = build_model("segnet", 2, 1.0)
