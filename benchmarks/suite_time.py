@@ -27,7 +27,7 @@ from offroad_path.report.tables import grid
 
 ROOT = Path(__file__).resolve().parents[1]
 TIERS = {"full": [], "everyday": ["-m", "not slow"]}
-SUMMARY = re.compile(r"=+ (.*) in ([0-9.]+)s")
+SUMMARY = re.compile(r"^=*\s*(\d+ (?:passed|failed|errors?|skipped)\b.*) in ([0-9.]+)s", re.M)  # pytest's last line, with -q or not
 
 
 def run_tier(tree: Path, tier: str) -> dict:

@@ -43,3 +43,15 @@ def test_a_test_not_marked_slow_over_the_budget_is_named_and_the_run_passes(tmp_
     assert run.returncode == 0 and "3 passed" in run.stdout, run.stdout[-2000:]
     named = run.stdout.split("not marked slow, yet over 0.3 s")[1].split("\n=")[0]
     assert "test_probe.py::test_dawdles" in named and "test_marked_slow" not in named and "test_quick" not in named
+
+
+def test_the_suite_timer_reads_each_tiers_counts_and_exit(tmp_path):
+    """benchmarks/suite_time.py times a tier by pytest's own last line: its counts and seconds, with -q."""
+    from suite_time import run_tier
+
+    (tmp_path / "test_probe.py").write_text(
+        "import pytest\n\ndef test_a():\n    pass\n\ndef test_b():\n    assert False\n\n@pytest.mark.slow\ndef test_c():\n    pass\n"
+    )
+    full, everyday = run_tier(tmp_path, "full"), run_tier(tmp_path, "everyday")
+    assert (full["passed"], full["failed"], full["exit"]) == (2, 1, 1) and full["seconds"] >= 0
+    assert (everyday["passed"], everyday["failed"], everyday["exit"]) == (1, 1, 1)
