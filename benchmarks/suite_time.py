@@ -43,6 +43,14 @@ def run_tier(tree: Path, tier: str) -> dict:
     return {"seconds": float(seconds), "exit": done.returncode, **parsed}
 
 
+def cpu_name() -> str:
+    """The CPU's model name (/proc/cpuinfo), else the platform's word for it."""
+    cpuinfo = Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.is_file() else []
+    names = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
+    return names[0] if names else platform.processor() or platform.machine()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tiers", default="full,everyday", help=f"comma-separated, of {', '.join(TIERS)}")
@@ -69,7 +77,7 @@ def main() -> None:
         finally:
             if args.against:
                 subprocess.run(["git", "worktree", "remove", "--force", str(trees[args.against])], cwd=ROOT, check=False)
-    print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores")
+    print(f"{cpu_name()}, {os.cpu_count()} cores")
     columns = ["tree", "tier", "seconds", "passed", "failed", "skipped", "exit"]
     print(grid(columns, ([run.get(c, 0) for c in columns] for run in runs)))
     if args.json:
